@@ -1,0 +1,1 @@
+"""Ground-station library and the `returnlink gcs` command line."""
