@@ -27,7 +27,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="returnlink", description="Lease-based automated return to link for MAVLink robots.")
+    p = argparse.ArgumentParser(
+        prog="returnlink", description="Lease-based automated return to link for MAVLink robots.")
     sub = p.add_subparsers(dest="command", required=True)
     d = sub.add_parser("dialect", help="the returnlink MAVLink dialect")
     d.add_argument("action", choices=["install", "path"], help="install: generate and register the pymavlink module")

@@ -286,7 +286,8 @@ class LeaseBook:
             return Check(Verdict.REJECT, claim, RejectReason.INVALID, "a root lease carries no commands")
         index = claim.path[0]
         if index < cur.index:
-            return Check(Verdict.REJECT, claim, RejectReason.EXPIRED, f"{claim} expired; current is [{self.epoch},{cur.index}]")
+            return Check(Verdict.REJECT, claim, RejectReason.EXPIRED,
+                         f"{claim} expired; current is [{self.epoch},{cur.index}]")
         if index == cur.index:
             if cur.holder is Holder.OPERATOR and not cur.claimed:
                 return Check(Verdict.REJECT, claim, RejectReason.EXPIRED, f"{claim} is not claimed yet")
