@@ -1,0 +1,312 @@
+"""The breadcrumb trail: where the robot has been, by its own estimate, and whether it could hear the operator there.
+
+Why it looks like this (DESIGN §6, and what SmartRTL gets wrong):
+
+* Crumbs come from the estimator, never from ground truth, so the same code runs on a real robot.
+* Simplification is online and O(1) per crumb: a *sleeve* (angular wedge) from the last kept point narrows with
+  every new crumb; a crumb is only kept when the wedge can no longer contain the path within the tolerance. Every
+  dropped crumb therefore lies within the tolerance of the kept polyline - a guarantee, not a heuristic.
+* Link transitions are anchors: the last crumb with a good link before a loss is always kept, so the return target
+  chosen from the compressed trail is the one the full trail would give.
+* Loops are found with a spatial hash of the kept segments (cells of TRL_LOOP_D), so each crumb costs a look at
+  nine cells instead of SmartRTL's O(n^2) pair scan. A kept point remembers the earliest older segment within
+  TRL_LOOP_D (its *shortcut*); the route planner follows shortcuts to skip loops.
+* Memory is preallocated and bounded by TRL_MAX_PTS. When it is full the oldest half is re-simplified with twice
+  the tolerance (its part's tolerance is recorded), so the trail degrades gracefully and never deactivates.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class TrailConfig:
+    spacing: float = 0.5  # TRL_SPACING
+    tolerance: float = 0.25  # TRL_TOL
+    loop_distance: float = 1.0  # TRL_LOOP_D
+    max_points: int = 2000  # TRL_MAX_PTS
+
+
+@dataclass(frozen=True)
+class Crumb:
+    x: float
+    y: float
+    t: float
+    std: float = 0.0
+    link_good: bool = True
+    rssi: float = math.nan
+
+
+def _seg_dist(px: float, py: float, ax: float, ay: float, bx: float, by: float) -> float:
+    dx, dy = bx - ax, by - ay
+    L2 = dx * dx + dy * dy
+    if L2 <= 1e-18:
+        return math.hypot(px - ax, py - ay)
+    u = max(0.0, min(1.0, ((px - ax) * dx + (py - ay) * dy) / L2))
+    return math.hypot(px - ax - u * dx, py - ay - u * dy)
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+class Trail:
+    """Kept crumbs in preallocated arrays, oldest first. Mutable: it is the one stateful part of the planner's
+    input, updated once per estimator output; everything that reads it (targets, routes) is a pure function."""
+
+    FIELDS = ("x", "y", "t", "std", "rssi", "tol")
+
+    def __init__(self, config: TrailConfig | None = None) -> None:
+        self.config = config or TrailConfig()
+        n = self.config.max_points
+        self._f = np.zeros((n, len(self.FIELDS)), dtype=np.float64)
+        self._good = np.zeros(n, dtype=bool)
+        self._anchor = np.zeros(n, dtype=bool)
+        self._shortcut = np.full(n, -1, dtype=np.int64)
+        self.count = 0
+        self.compactions = 0
+        self.crumbs_seen = 0
+        self._grid: dict[tuple[int, int], list[int]] = {}
+        self._reset_pending()
+        self._last: Crumb | None = None  # last crumb seen (recorded or not)
+        self._rec: Crumb | None = None  # last crumb recorded (spacing reference)
+
+    # ----- reading -----------------------------------------------------------------------------------------
+    def __len__(self) -> int:
+        return self.count + (1 if self._pend is not None else 0)
+
+    def point(self, i: int) -> tuple[float, float]:
+        if i == self.count and self._pend is not None:
+            return self._pend.x, self._pend.y
+        return float(self._f[i, 0]), float(self._f[i, 1])
+
+    def points(self) -> np.ndarray:
+        """Kept points plus the newest crumb (the open end of the sleeve), shape (n, 2)."""
+        pts = self._f[: self.count, :2].copy()
+        if self._pend is not None:
+            pts = np.vstack([pts, [[self._pend.x, self._pend.y]]])
+        return pts
+
+    def link_good(self) -> np.ndarray:
+        good = self._good[: self.count].copy()
+        if self._pend is not None:
+            good = np.append(good, self._pend.link_good)
+        return good
+
+    def times(self) -> np.ndarray:
+        t = self._f[: self.count, 2].copy()
+        if self._pend is not None:
+            t = np.append(t, self._pend.t)
+        return t
+
+    def anchors(self) -> np.ndarray:
+        return self._anchor[: self.count].copy()
+
+    def tolerances(self) -> np.ndarray:
+        """Per kept point: the tolerance its part of the trail was simplified with."""
+        return self._f[: self.count, 5].copy()
+
+    def shortcut(self, i: int) -> int:
+        return int(self._shortcut[i]) if i < self.count else self._pend_shortcut
+
+    @property
+    def max_tolerance(self) -> float:
+        return float(self._f[: self.count, 5].max()) if self.count else self.config.tolerance
+
+    # ----- writing -----------------------------------------------------------------------------------------
+    def add(self, crumb: Crumb) -> None:
+        """Feed one estimator output. Amortised O(1)."""
+        self.crumbs_seen += 1
+        last, self._last = self._last, crumb
+        transition = last is not None and last.link_good != crumb.link_good
+        rec = self._rec
+        if not transition and rec is not None and math.hypot(crumb.x - rec.x, crumb.y - rec.y) < self.config.spacing:
+            return
+        self._rec = crumb
+        if self.count == 0 and self._pend is None:
+            self._commit(crumb, anchor=True)
+            return
+        if transition:
+            # both sides of a link transition are anchors: the last crumb with the old tag, then the new one
+            if last is not None and self._pend is not None and (last.x, last.y) != (self._pend.x, self._pend.y):
+                self._extend(last)
+            if self._pend is not None:
+                self._commit(self._pend, anchor=True)
+                self._reset_pending()
+            self._commit(crumb, anchor=True)
+            return
+        self._extend(crumb)
+
+    # sleeve simplification -------------------------------------------------------------------------------
+    def _reset_pending(self) -> None:
+        self._pend: Crumb | None = None
+        self._lo = -math.inf
+        self._hi = math.inf
+        self._base = 0.0  # direction the wedge is measured around
+        self._maxd = 0.0
+        self._pend_shortcut = -1
+
+    def _extend(self, c: Crumb) -> None:
+        tol = self.config.tolerance
+        ax, ay = self._f[self.count - 1, 0], self._f[self.count - 1, 1]
+        dx, dy = c.x - ax, c.y - ay
+        d = math.hypot(dx, dy)
+        loop = self._find_loop(c.x, c.y)
+        fits = True
+        if self._pend is not None:
+            if loop >= 0 and (self._pend_shortcut < 0 or loop < self._pend_shortcut):
+                fits = False  # a new loop closes here: keep the crossing as a point of its own
+            elif d <= tol:
+                fits = d >= self._maxd - tol
+            else:
+                ang = _wrap(math.atan2(dy, dx) - self._base)
+                fits = self._lo <= ang <= self._hi and d >= self._maxd - tol
+        if not fits and self._pend is not None:
+            self._commit(self._pend, anchor=False)
+            self._reset_pending()
+            ax, ay = self._f[self.count - 1, 0], self._f[self.count - 1, 1]
+            dx, dy = c.x - ax, c.y - ay
+            d = math.hypot(dx, dy)
+        if self._pend is None:
+            self._base = math.atan2(dy, dx) if d > 0 else 0.0
+        # narrow the wedge by this crumb's own cone
+        if d > tol:
+            ang = _wrap(math.atan2(dy, dx) - self._base)
+            half = math.asin(min(1.0, tol / d))
+            self._lo = max(self._lo, ang - half)
+            self._hi = min(self._hi, ang + half)
+        self._maxd = max(self._maxd, d)
+        self._pend = c
+        if loop >= 0 and (self._pend_shortcut < 0 or loop < self._pend_shortcut):
+            self._pend_shortcut = loop
+
+    def _commit(self, c: Crumb, anchor: bool) -> None:
+        if self.count >= self.config.max_points:
+            self._compact()
+        i = self.count
+        self._f[i] = (c.x, c.y, c.t, c.std, c.rssi, self.config.tolerance)
+        self._good[i] = c.link_good
+        self._anchor[i] = anchor
+        shortcut = self._pend_shortcut if c is self._pend else self._find_loop(c.x, c.y)
+        self._shortcut[i] = shortcut
+        self.count += 1
+        if i > 0:
+            self._grid_add(i - 1)
+
+    # loop index ------------------------------------------------------------------------------------------
+    def _cell(self, x: float, y: float) -> tuple[int, int]:
+        s = self.config.loop_distance
+        return int(math.floor(x / s)), int(math.floor(y / s))
+
+    def _grid_add(self, seg: int) -> None:
+        """Register kept segment seg -> seg+1 in every cell it passes (cost ~ its length / cell size)."""
+        ax, ay, bx, by = self._f[seg, 0], self._f[seg, 1], self._f[seg + 1, 0], self._f[seg + 1, 1]
+        steps = max(1, int(math.hypot(bx - ax, by - ay) / (0.5 * self.config.loop_distance)) + 1)
+        seen = set()
+        for k in range(steps + 1):
+            u = k / steps
+            cell = self._cell(ax + u * (bx - ax), ay + u * (by - ay))
+            if cell not in seen:
+                seen.add(cell)
+                self._grid.setdefault(cell, []).append(seg)
+
+    def _find_loop(self, x: float, y: float) -> int:
+        """The earliest kept segment within TRL_LOOP_D of (x, y) that is not just the trail behind us."""
+        if self.count < 3:
+            return -1
+        L = self.config.loop_distance
+        cx, cy = self._cell(x, y)
+        best = -1
+        for gx in (cx - 1, cx, cx + 1):
+            for gy in (cy - 1, cy, cy + 1):
+                for seg in self._grid.get((gx, gy), ()):
+                    if best != -1 and seg >= best:
+                        break
+                    if seg + 1 >= self.count - 1:
+                        continue
+                    f = self._f
+                    if _seg_dist(x, y, f[seg, 0], f[seg, 1], f[seg + 1, 0], f[seg + 1, 1]) >= L:
+                        continue
+                    # the trail just behind us is always near: only a return after 3 L of path closes a loop
+                    if self._path_length_since(seg + 1, x, y) < 3.0 * L:
+                        continue
+                    best = seg
+                    break
+        return best
+
+    def _path_length_since(self, i: int, x: float, y: float) -> float:
+        """Path length from kept point i to (x, y), bounded early: we only need to know if it exceeds 3 L."""
+        limit = 3.0 * self.config.loop_distance
+        total = 0.0
+        f = self._f
+        for k in range(i, self.count - 1):
+            total += math.hypot(f[k + 1, 0] - f[k, 0], f[k + 1, 1] - f[k, 1])
+            if total >= limit:
+                return total
+        return total + math.hypot(x - f[self.count - 1, 0], y - f[self.count - 1, 1])
+
+    # bounded memory --------------------------------------------------------------------------------------
+    def _compact(self) -> None:
+        """Re-simplify the oldest half with a doubled tolerance until a quarter of the memory is free."""
+        self.compactions += 1
+        n = self.count
+        half = n // 2
+        keep = np.ones(n, dtype=bool)
+        tol = self._f[:half, 5].max() if half else self.config.tolerance
+        target_free = max(1, self.config.max_points // 4)
+        for _ in range(12):
+            tol *= 2.0
+            keep[:half] = _douglas_peucker(self._f[:half + 1, :2], tol, self._anchor[:half + 1])[:half]
+            if n - int(keep.sum()) >= target_free:
+                break
+        else:
+            # anchors alone fill the old half: drop every other old anchor (the oldest information goes first)
+            idx = np.flatnonzero(keep[:half])
+            keep[idx[1::2]] = False
+        self._f[:half, 5] = np.where(keep[:half], np.maximum(self._f[:half, 5], tol), self._f[:half, 5])
+        old_to_new = np.cumsum(keep) - 1
+        for arr in (self._f, self._good, self._anchor, self._shortcut):
+            kept = arr[:n][keep].copy()
+            arr[: len(kept)] = kept
+        self.count = int(keep.sum())
+        sc = self._shortcut[: self.count]
+        valid = sc >= 0
+        sc[valid] = old_to_new[sc[valid]]
+        if self._pend_shortcut >= 0:
+            self._pend_shortcut = int(old_to_new[self._pend_shortcut])
+        self._grid = {}
+        for seg in range(self.count - 1):
+            self._grid_add(seg)
+
+
+def _douglas_peucker(pts: np.ndarray, tol: float, anchors: np.ndarray) -> np.ndarray:
+    """Keep-mask of an iterative Douglas-Peucker that never drops anchors (or the two ends)."""
+    n = len(pts)
+    keep = np.zeros(n, dtype=bool)
+    keep[0] = keep[-1] = True
+    keep |= anchors[:n]
+    marks = np.flatnonzero(keep)
+    stack = list(zip(marks[:-1], marks[1:], strict=True))
+    while stack:
+        a, b = stack.pop()
+        if b - a < 2:
+            continue
+        seg = pts[b] - pts[a]
+        rel = pts[a + 1 : b] - pts[a]
+        L2 = float(seg @ seg)
+        if L2 < 1e-18:
+            d = np.hypot(rel[:, 0], rel[:, 1])
+        else:
+            u = np.clip(rel @ seg / L2, 0.0, 1.0)
+            d = np.hypot(rel[:, 0] - u * seg[0], rel[:, 1] - u * seg[1])
+        k = int(np.argmax(d))
+        if d[k] > tol:
+            m = a + 1 + k
+            keep[m] = True
+            stack.append((a, m))
+            stack.append((m, b))
+    return keep
