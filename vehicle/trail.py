@@ -71,6 +71,7 @@ class Trail:
         self.compactions = 0
         self.crumbs_seen = 0
         self._grid: dict[tuple[int, int], list[int]] = {}
+        self._run_loop = -1  # loop found by the previous crumb (-1: none): a new run of overlap starts a point
         self._reset_pending()
         self._last: Crumb | None = None  # last crumb seen (recorded or not)
         self._rec: Crumb | None = None  # last crumb recorded (spacing reference)
@@ -151,26 +152,32 @@ class Trail:
         self._pend_shortcut = -1
 
     def _extend(self, c: Crumb) -> None:
+        loop = self._find_loop(c.x, c.y)
+        entering = loop >= 0 and self._run_loop < 0
+        self._run_loop = loop
+        if entering:
+            # the trail comes back onto itself here: keep the crossing as a point of its own, with its shortcut
+            if self._pend is not None:
+                self._commit(self._pend, anchor=False)
+                self._reset_pending()
+            self._commit(c, anchor=False, shortcut=loop)
+            return
         tol = self.config.tolerance
         ax, ay = self._f[self.count - 1, 0], self._f[self.count - 1, 1]
         dx, dy = c.x - ax, c.y - ay
         d = math.hypot(dx, dy)
-        loop = self._find_loop(c.x, c.y)
-        fits = True
         if self._pend is not None:
-            if loop >= 0 and (self._pend_shortcut < 0 or loop < self._pend_shortcut):
-                fits = False  # a new loop closes here: keep the crossing as a point of its own
-            elif d <= tol:
+            if d <= tol:
                 fits = d >= self._maxd - tol
             else:
                 ang = _wrap(math.atan2(dy, dx) - self._base)
                 fits = self._lo <= ang <= self._hi and d >= self._maxd - tol
-        if not fits and self._pend is not None:
-            self._commit(self._pend, anchor=False)
-            self._reset_pending()
-            ax, ay = self._f[self.count - 1, 0], self._f[self.count - 1, 1]
-            dx, dy = c.x - ax, c.y - ay
-            d = math.hypot(dx, dy)
+            if not fits:
+                self._commit(self._pend, anchor=False)
+                self._reset_pending()
+                ax, ay = self._f[self.count - 1, 0], self._f[self.count - 1, 1]
+                dx, dy = c.x - ax, c.y - ay
+                d = math.hypot(dx, dy)
         if self._pend is None:
             self._base = math.atan2(dy, dx) if d > 0 else 0.0
         # narrow the wedge by this crumb's own cone
@@ -181,17 +188,17 @@ class Trail:
             self._hi = min(self._hi, ang + half)
         self._maxd = max(self._maxd, d)
         self._pend = c
-        if loop >= 0 and (self._pend_shortcut < 0 or loop < self._pend_shortcut):
-            self._pend_shortcut = loop
+        self._pend_shortcut = loop  # the open end's own shortcut: the newest crumb's is the one a return uses
 
-    def _commit(self, c: Crumb, anchor: bool) -> None:
+    def _commit(self, c: Crumb, anchor: bool, shortcut: int | None = None) -> None:
+        if shortcut is None:
+            shortcut = self._pend_shortcut if c is self._pend else -1
         if self.count >= self.config.max_points:
-            self._compact()
+            shortcut = self._compact(shortcut)
         i = self.count
         self._f[i] = (c.x, c.y, c.t, c.std, c.rssi, self.config.tolerance)
         self._good[i] = c.link_good
         self._anchor[i] = anchor
-        shortcut = self._pend_shortcut if c is self._pend else self._find_loop(c.x, c.y)
         self._shortcut[i] = shortcut
         self.count += 1
         if i > 0:
@@ -250,14 +257,17 @@ class Trail:
         return total + math.hypot(x - f[self.count - 1, 0], y - f[self.count - 1, 1])
 
     # bounded memory --------------------------------------------------------------------------------------
-    def _compact(self) -> None:
-        """Re-simplify the oldest half with a doubled tolerance until a quarter of the memory is free."""
+    def _compact(self, pending_shortcut: int) -> int:
+        """Re-simplify the oldest half with a doubled tolerance until an eighth of the memory is free.
+
+        Each compaction costs O(n) and frees n/8 slots, so at least n/8 crumbs are kept between two of them:
+        amortised O(1) per crumb."""
         self.compactions += 1
         n = self.count
         half = n // 2
         keep = np.ones(n, dtype=bool)
         tol = self._f[:half, 5].max() if half else self.config.tolerance
-        target_free = max(1, self.config.max_points // 4)
+        target_free = max(1, self.config.max_points // 8)
         for _ in range(12):
             tol *= 2.0
             keep[:half] = _douglas_peucker(self._f[:half + 1, :2], tol, self._anchor[:half + 1])[:half]
@@ -278,9 +288,12 @@ class Trail:
         sc[valid] = old_to_new[sc[valid]]
         if self._pend_shortcut >= 0:
             self._pend_shortcut = int(old_to_new[self._pend_shortcut])
+        if self._run_loop >= 0:
+            self._run_loop = int(old_to_new[self._run_loop])
         self._grid = {}
         for seg in range(self.count - 1):
             self._grid_add(seg)
+        return int(old_to_new[pending_shortcut]) if pending_shortcut >= 0 else -1
 
 
 def _douglas_peucker(pts: np.ndarray, tol: float, anchors: np.ndarray) -> np.ndarray:

@@ -1,0 +1,211 @@
+"""Robot models on pymunk bodies: a differential-drive rover and a trotting quadruped.
+
+Both take the same command (forward speed, yaw rate) and report the same things (true pose for scoring, an
+odometry speed for the estimator), so the vehicle software cannot tell them apart except by their limits.
+The body is dynamic, so walls stop it and the world counts the contacts; the commanded velocity is applied each
+step (a velocity-controlled base, as real robots expose).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pymunk
+
+from sim.world import ROBOT, World
+
+
+def _approach(current: float, target: float, max_step: float) -> float:
+    return current + max(-max_step, min(max_step, target - current))
+
+
+class Robot:
+    kind = "robot"
+    mav_type = 10  # MAV_TYPE_GROUND_ROVER
+
+    def __init__(self, world: World, x: float, y: float, yaw: float, rng: np.random.Generator, radius: float,
+                 max_speed: float, max_accel: float, max_yaw_rate: float, max_yaw_accel: float) -> None:
+        self.rng = rng
+        self.max_speed, self.max_accel = max_speed, max_accel
+        self.max_yaw_rate, self.max_yaw_accel = max_yaw_rate, max_yaw_accel
+        self.body = pymunk.Body(10.0, math.inf)
+        self.body.position = (x, y)
+        self.body.angle = yaw
+        self.shape = pymunk.Circle(self.body, radius)
+        self.shape.collision_type = ROBOT
+        self.shape.friction = 0.3
+        world.space.add(self.body, self.shape)
+        self.space = world.space
+        self.cmd_speed = 0.0
+        self.cmd_yaw_rate = 0.0
+        self.speed = 0.0  # commanded-after-limits forward speed
+        self.yaw_rate = 0.0
+        self.odometer = 0.0
+
+    def command(self, speed: float, yaw_rate: float) -> None:
+        self.cmd_speed = max(-self.max_speed, min(self.max_speed, speed))
+        self.cmd_yaw_rate = max(-self.max_yaw_rate, min(self.max_yaw_rate, yaw_rate))
+
+    def limits(self, speed: float, yaw_rate: float) -> tuple[float, float]:
+        """Extra model-specific limits (the quadruped's stride and step frequency)."""
+        return speed, yaw_rate
+
+    def before_step(self, dt: float) -> None:
+        speed, yaw_rate = self.limits(self.cmd_speed, self.cmd_yaw_rate)
+        self.speed = _approach(self.speed, speed, self.max_accel * dt)
+        self.yaw_rate = _approach(self.yaw_rate, yaw_rate, self.max_yaw_accel * dt)
+        a = self.body.angle
+        vx, vy = self.speed * math.cos(a), self.speed * math.sin(a)
+        # a velocity-controlled base pushes against a wall but cannot drive into it: drop the inward component
+        for hit in self.space.shape_query(self.shape):
+            if hit.shape is None or hit.shape.body is self.body:
+                continue
+            n = hit.contact_point_set.normal  # from our shape towards the other one
+            into = vx * n.x + vy * n.y
+            if into > 0:
+                vx, vy = vx - into * n.x, vy - into * n.y
+        self.body.velocity = (vx, vy)
+        self.body.angular_velocity = self.yaw_rate
+
+    def after_step(self, dt: float) -> None:
+        vx, vy = self.body.velocity
+        a = self.body.angle
+        self.true_speed = vx * math.cos(a) + vy * math.sin(a)
+        self.odometer += abs(self.true_speed) * dt
+
+    @property
+    def pose(self) -> tuple[float, float, float]:
+        x, y = self.body.position
+        return float(x), float(y), float(self.body.angle)
+
+    def odometry_speed(self, dt: float) -> float:
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class RoverSpec:
+    radius: float = 0.35
+    max_speed: float = 2.0
+    max_accel: float = 1.5
+    max_yaw_rate: float = 1.8
+    max_yaw_accel: float = 6.0
+    wheel_scale_error: float = 0.02  # calibration bias of the wheel radius
+    wheel_noise: float = 0.03  # m/s
+    slip_std: float = 0.02
+
+
+class Rover(Robot):
+    """Differential drive / unicycle with acceleration and turn-rate limits; wheel odometry with scale bias and
+    slip that grows with turning."""
+
+    kind = "rover"
+    mav_type = 10
+
+    def __init__(self, world: World, x: float, y: float, yaw: float, rng: np.random.Generator,
+                 spec: RoverSpec = RoverSpec()) -> None:
+        super().__init__(world, x, y, yaw, rng, spec.radius, spec.max_speed, spec.max_accel, spec.max_yaw_rate,
+                         spec.max_yaw_accel)
+        self.spec = spec
+        self.scale = 1.0 + rng.normal(0.0, spec.wheel_scale_error)
+
+    def odometry_speed(self, dt: float) -> float:
+        s = self.spec
+        slip = self.rng.normal(0.0, s.slip_std * (1.0 + abs(self.yaw_rate)))
+        # wheels report the commanded wheel speed: against a wall they spin while the body does not move
+        return self.speed * self.scale * (1.0 + slip) + self.rng.normal(0.0, s.wheel_noise)
+
+
+@dataclass(frozen=True)
+class LeggedSpec:
+    radius: float = 0.4
+    hip_height: float = 0.32  # m, standing
+    upper_leg: float = 0.22
+    lower_leg: float = 0.22
+    max_step_hz: float = 2.5  # step frequency limit of a trot
+    min_step_hz: float = 1.2
+    stride_margin: float = 0.85  # fraction of the geometric reach used
+    body_half_length: float = 0.3
+    body_half_width: float = 0.12
+    max_yaw_rate: float = 1.2
+    max_accel: float = 1.2
+    max_yaw_accel: float = 4.0
+    slip_std: float = 0.06  # per-step foot slip, fraction of the step
+    leg_odo_noise: float = 0.04
+
+
+class Legged(Robot):
+    """A quadruped trot: diagonal leg pairs alternate stance and swing. The leg geometry bounds the stride (a foot
+    can reach sqrt((l1 + l2)^2 - h^2) ahead of or behind its hip), the step-frequency limit bounds the speed, and
+    every touchdown slips a little, which is what the leg odometry gets wrong."""
+
+    kind = "legged"
+    mav_type = 46  # MAV_TYPE_GROUND_QUADRUPED
+
+    def __init__(self, world: World, x: float, y: float, yaw: float, rng: np.random.Generator,
+                 spec: LeggedSpec = LeggedSpec()) -> None:
+        reach = math.sqrt(max(0.0, (spec.upper_leg + spec.lower_leg) ** 2 - spec.hip_height**2))
+        self.max_stride = 2.0 * reach * spec.stride_margin
+        top = self.max_stride * spec.max_step_hz / 2.0  # a trot covers one stride per two steps of a pair
+        super().__init__(world, x, y, yaw, rng, spec.radius, top, spec.max_accel, spec.max_yaw_rate,
+                         spec.max_yaw_accel)
+        self.spec = spec
+        self.phase = 0.0  # 0..1 over one gait cycle; pair A in stance for phase < 0.5
+        self.step_hz = spec.min_step_hz
+        self.slip = 0.0
+        self.steps = 0
+        self.feet = self._nominal_feet()
+
+    def _hips(self) -> list[tuple[float, float]]:
+        x, y, a = self.pose
+        s = self.spec
+        c, sn = math.cos(a), math.sin(a)
+        out = []
+        for fx, fy in ((1, 1), (1, -1), (-1, 1), (-1, -1)):  # FL, FR, RL, RR
+            lx, ly = fx * s.body_half_length, fy * s.body_half_width
+            out.append((x + lx * c - ly * sn, y + lx * sn + ly * c))
+        return out
+
+    def _nominal_feet(self) -> list[tuple[float, float]]:
+        return self._hips()
+
+    def limits(self, speed: float, yaw_rate: float) -> tuple[float, float]:
+        s = self.spec
+        # choose the step frequency for this speed, then clamp speed to what the stride allows at that frequency
+        need_hz = 2.0 * abs(speed) / max(1e-6, self.max_stride)
+        self.step_hz = max(s.min_step_hz, min(s.max_step_hz, need_hz))
+        cap = self.max_stride * self.step_hz / 2.0
+        speed = max(-cap, min(cap, speed))
+        # turning also uses up stride: the outer feet travel further
+        turn_cap = s.max_yaw_rate * max(0.3, 1.0 - abs(speed) / (self.max_speed + 1e-6))
+        return speed, max(-turn_cap, min(turn_cap, yaw_rate))
+
+    def after_step(self, dt: float) -> None:
+        super().after_step(dt)
+        old = self.phase
+        self.phase = (self.phase + self.step_hz * dt) % 1.0
+        moving = abs(self.speed) > 0.02 or abs(self.yaw_rate) > 0.02
+        if moving and (old < 0.5 <= self.phase or self.phase < old):
+            # touchdown of a diagonal pair: Raibert foot placement ahead of the hip, plus slip
+            self.steps += 1
+            self.slip = self.rng.normal(0.0, self.spec.slip_std)
+            pair = (0, 3) if self.phase < 0.5 else (1, 2)
+            hips = self._hips()
+            x, y, a = self.pose
+            ahead = 0.25 * self.speed / max(self.step_hz, 1e-6)
+            for i in pair:
+                hx, hy = hips[i]
+                self.feet[i] = (hx + ahead * math.cos(a), hy + ahead * math.sin(a))
+
+    def odometry_speed(self, dt: float) -> float:
+        # stance-foot kinematics measure the body's motion over the ground, wrong by the step's slip
+        return self.true_speed * (1.0 + self.slip) + self.rng.normal(0.0, self.spec.leg_odo_noise)
+
+
+def make_robot(kind: str, world: World, x: float, y: float, yaw: float, rng: np.random.Generator) -> Robot:
+    if kind == "rover":
+        return Rover(world, x, y, yaw, rng)
+    if kind == "legged":
+        return Legged(world, x, y, yaw, rng)
+    raise ValueError(f"unknown vehicle {kind!r} (rover or legged)")

@@ -1,0 +1,313 @@
+"""Scenario files (TOML): the place, the robot, the operator's script and what counts as success.
+
+Every error names the file, the line and the field, because a scenario is written by hand.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import sys
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from sim.world import Station, Wall, World
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+BUILTIN = ("tunnel", "warehouse", "loop", "open", "handover")
+PLAN_COMMANDS = ("RETURN_TO_LINK", "BOUNDARY", "LOITER", "RETURN_TO_LAUNCH", "WAYPOINT")
+EVENT_ACTIONS = ("jam", "unjam", "kill_gcs", "revive_gcs", "takeover", "rtl", "param", "claim", "stop")
+
+
+class ScenarioError(ValueError):
+    def __init__(self, file: str, line: int | None, fld: str, message: str) -> None:
+        self.file, self.line, self.field = file, line, fld
+        where = f"{file}:{line}" if line else file
+        super().__init__(f"{where}: {fld}: {message}" if fld else f"{where}: {message}")
+
+
+@dataclass(frozen=True)
+class RadioSpec:
+    """Log-distance path loss + walls + shadowing (used by link/radio)."""
+
+    frequency_mhz: float = 2400.0
+    ref_loss_db: float = 40.0  # loss at 1 m
+    exponent: float = 2.2
+    shadowing_db: float = 3.0
+    shadowing_corr_m: float = 3.0
+    noise_floor_dbm: float = -95.0
+    sensitivity_dbm: float = -90.0  # 50 % packet delivery
+    fade_width_db: float = 3.0  # how sharply delivery falls around the sensitivity
+    latency_ms: float = 20.0
+    jitter_ms: float = 5.0
+
+
+@dataclass(frozen=True)
+class PlanItem:
+    command: str
+    max_displacement: float = 0.0
+    speed: float = 0.0
+    target: int = -1
+    on_regain: int = -1
+    time: float = 0.0
+    x: float = 0.0
+    y: float = 0.0
+
+
+@dataclass(frozen=True)
+class Event:
+    t: float
+    action: str
+    duration: float = 0.0
+    station: str = ""
+    name: str = ""
+    value: float = 0.0
+
+
+@dataclass(frozen=True)
+class Criteria:
+    return_started: bool | None = None
+    link_regained: bool | None = None
+    max_final_target_error_m: float | None = None
+    max_collisions: int = 0
+    max_displacement_respected: bool = True
+    min_distance_back_m: float | None = None
+    min_commands_rejected: int = 0
+    chain_reasons: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    description: str
+    file: str
+    duration: float
+    seed: int
+    vehicle: str
+    bounds: tuple[float, float, float, float]
+    walls: tuple[Wall, ...]
+    denied: tuple[tuple[tuple[float, float], ...], ...]
+    stations: tuple[Station, ...]
+    radio: RadioSpec
+    start: tuple[float, float, float]
+    operator_station: str
+    teleop: str
+    route: tuple[tuple[float, float, float], ...]
+    resume_route: tuple[tuple[float, float, float], ...]
+    plan: tuple[PlanItem, ...]
+    params: dict[str, float] = field(default_factory=dict)
+    events: tuple[Event, ...] = ()
+    criteria: Criteria = Criteria()
+
+    def world(self) -> World:
+        return World(self.walls, self.denied, self.stations)
+
+    def station(self, name: str) -> Station:
+        for s in self.stations:
+            if s.name == name:
+                return s
+        raise KeyError(name)
+
+
+class _Reader:
+    """Typed access to the parsed TOML that knows where each field was written."""
+
+    def __init__(self, file: str, text: str) -> None:
+        self.file, self.lines = file, text.splitlines()
+
+    def line_of(self, path: str) -> int | None:
+        """Best-effort line of ``a.b[2].c``: the table header (n-th occurrence for arrays), then the key."""
+        parts = re.findall(r"([A-Za-z_]+)(?:\[(\d+)\])?", path)
+        start, table = 0, ""
+        for k, (name, idx) in enumerate(parts):
+            is_last = k == len(parts) - 1
+            table = f"{table}.{name}" if table else name
+            if idx:
+                pat = re.compile(rf"^\s*\[\[\s*{re.escape(table)}\s*\]\]")
+                hits = [i for i, ln in enumerate(self.lines) if pat.match(ln)]
+                if int(idx) < len(hits):
+                    start = hits[int(idx)]
+                    continue
+                key = re.compile(rf"^\s*{re.escape(name)}\s*=")
+                for i in range(start, len(self.lines)):
+                    if key.match(self.lines[i]):
+                        return i + 1
+                return start + 1 if start else None
+            if is_last:
+                key = re.compile(rf"^\s*{re.escape(name)}\s*=")
+                for i in range(start, len(self.lines)):
+                    if key.match(self.lines[i]):
+                        return i + 1
+                return start + 1 if start else None
+            pat = re.compile(rf"^\s*\[\s*{re.escape(table)}\s*\]")
+            for i in range(start, len(self.lines)):
+                if pat.match(self.lines[i]):
+                    start = i
+                    break
+        return start + 1 if start else None
+
+    def fail(self, path: str, message: str) -> ScenarioError:
+        return ScenarioError(self.file, self.line_of(path), path, message)
+
+    def get(self, d: dict[str, Any], key: str, path: str, kind: type | tuple[type, ...], default: Any = ...) -> Any:
+        if key not in d:
+            if default is ...:
+                raise self.fail(path, "is required")
+            return default
+        v = d[key]
+        if kind is float and isinstance(v, int) and not isinstance(v, bool):
+            v = float(v)
+        if not isinstance(v, kind) or (kind is int and isinstance(v, bool)):
+            names = kind.__name__ if isinstance(kind, type) else " or ".join(k.__name__ for k in kind)
+            raise self.fail(path, f"must be {names}, got {type(v).__name__} {v!r}")
+        if isinstance(v, float) and not math.isfinite(v):
+            raise self.fail(path, "must be finite")
+        return v
+
+    def number(self, d: dict[str, Any], key: str, path: str, default: Any = ..., lo: float = -math.inf,
+               hi: float = math.inf) -> float:
+        v = self.get(d, key, path, float, default)
+        if v is not None and not lo <= v <= hi:
+            raise self.fail(path, f"must be within {lo}..{hi}, got {v}")
+        return v
+
+    def point(self, v: Any, path: str, n: int = 2) -> tuple[float, ...]:
+        if (not isinstance(v, list) or len(v) != n
+                or not all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in v)):
+            raise self.fail(path, f"must be a list of {n} numbers, got {v!r}")
+        return tuple(float(c) for c in v)
+
+    def points(self, d: dict[str, Any], key: str, path: str, n: int = 2, min_len: int = 2) -> tuple:
+        v = self.get(d, key, path, list)
+        if len(v) < min_len:
+            raise self.fail(path, f"needs at least {min_len} points")
+        return tuple(self.point(p, f"{path}", n) for p in v)
+
+
+def parse(text: str, file: str = "<scenario>") -> Scenario:
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        m = re.search(r"line (\d+)", str(e))
+        raise ScenarioError(file, int(m.group(1)) if m else None, "", f"not valid TOML: {e}") from None
+    r = _Reader(file, text)
+    known = {"name", "description", "duration", "seed", "vehicle", "world", "radio", "start", "operator",
+             "events", "criteria"}
+    for k in raw:
+        if k not in known:
+            raise r.fail(k, f"unknown field (expected one of {', '.join(sorted(known))})")
+    name = r.get(raw, "name", "name", str)
+    vehicle = r.get(raw, "vehicle", "vehicle", str, "rover")
+    if vehicle not in ("rover", "legged"):
+        raise r.fail("vehicle", f"must be rover or legged, got {vehicle!r}")
+    world = r.get(raw, "world", "world", dict)
+    b = r.get(world, "bounds", "world.bounds", list)
+    if len(b) != 4 or not all(isinstance(c, (int, float)) for c in b) or b[0] >= b[2] or b[1] >= b[3]:
+        raise r.fail("world.bounds", "must be [xmin, ymin, xmax, ymax] with min < max")
+    walls = []
+    for k, w in enumerate(r.get(world, "walls", "world.walls", list, [])):
+        p = f"world.walls[{k}]"
+        walls.append(Wall(r.points(w, "points", f"{p}.points"),
+                          r.number(w, "thickness", f"{p}.thickness", 0.5, 0.01, 20.0),
+                          r.number(w, "attenuation_db", f"{p}.attenuation_db", 20.0, 0.0, 200.0)))
+    denied = tuple(r.points(z, "polygon", f"world.denied[{k}].polygon", min_len=3)
+                   for k, z in enumerate(r.get(world, "denied", "world.denied", list, [])))
+    stations = []
+    for k, s in enumerate(r.get(world, "stations", "world.stations", list, [])):
+        p = f"world.stations[{k}]"
+        x, y = r.point(r.get(s, "position", f"{p}.position", list), f"{p}.position")
+        sysid = r.get(s, "sysid", f"{p}.sysid", int, 255)
+        if not 1 <= sysid <= 255:
+            raise r.fail(f"{p}.sysid", f"must be 1..255, got {sysid}")
+        stations.append(Station(r.get(s, "name", f"{p}.name", str), x, y, sysid,
+                                r.number(s, "power_dbm", f"{p}.power_dbm", 20.0, -30.0, 40.0)))
+    if not stations:
+        raise r.fail("world.stations", "needs at least one ground station")
+    radio_raw = r.get(raw, "radio", "radio", dict, {})
+    radio_kw = {}
+    for fname, default in RadioSpec.__dataclass_fields__.items():
+        if fname in radio_raw:
+            radio_kw[fname] = r.number(radio_raw, fname, f"radio.{fname}")
+        del default
+    for k in radio_raw:
+        if k not in RadioSpec.__dataclass_fields__:
+            raise r.fail(f"radio.{k}", "unknown radio field")
+    start_raw = r.get(raw, "start", "start", dict)
+    sx, sy = r.point(r.get(start_raw, "position", "start.position", list), "start.position")
+    syaw = math.radians(r.number(start_raw, "yaw_deg", "start.yaw_deg", 0.0, -360, 360))
+    op = r.get(raw, "operator", "operator", dict)
+    op_station = r.get(op, "station", "operator.station", str, stations[0].name)
+    if op_station not in {s.name for s in stations}:
+        raise r.fail("operator.station", f"no station named {op_station!r}")
+    teleop = r.get(op, "teleop", "operator.teleop", str, "velocity")
+    if teleop not in ("velocity", "manual"):
+        raise r.fail("operator.teleop", f"must be velocity or manual, got {teleop!r}")
+    route = r.points(op, "route", "operator.route", n=3, min_len=1)
+    resume = r.points(op, "resume_route", "operator.resume_route", n=3, min_len=1) if "resume_route" in op else ()
+    for p in (*route, *resume):
+        if not 0 < p[2] <= 5:
+            raise r.fail("operator.route", f"speed must be in (0, 5] m/s, got {p[2]}")
+    plan = []
+    for k, it in enumerate(r.get(op, "plan", "operator.plan", list, [])):
+        p = f"operator.plan[{k}]"
+        if not isinstance(it, dict):
+            raise r.fail(p, "must be a table like {command = \"RETURN_TO_LINK\"}")
+        cmd = r.get(it, "command", f"{p}.command", str)
+        if cmd not in PLAN_COMMANDS:
+            raise r.fail(f"{p}.command", f"unknown plan command {cmd!r} (one of {', '.join(PLAN_COMMANDS)})")
+        plan.append(PlanItem(cmd, r.number(it, "max_displacement", f"{p}.max_displacement", 0.0, 0, 10000),
+                             r.number(it, "speed", f"{p}.speed", 0.0, 0, 5), int(r.number(it, "target", f"{p}.target",
+                                                                                       -1, -1, 2)),
+                             int(r.number(it, "on_regain", f"{p}.on_regain", -1, -1, 1)),
+                             r.number(it, "time", f"{p}.time", 0.0, 0, 3600), r.number(it, "x", f"{p}.x", 0.0),
+                             r.number(it, "y", f"{p}.y", 0.0)))
+    params_raw = r.get(op, "params", "operator.params", dict, {})
+    params = {k: r.number(params_raw, k, f"operator.params.{k}") for k in params_raw}
+    events = []
+    for k, ev in enumerate(r.get(raw, "events", "events", list, [])):
+        p = f"events[{k}]"
+        action = r.get(ev, "action", f"{p}.action", str)
+        if action not in EVENT_ACTIONS:
+            raise r.fail(f"{p}.action", f"unknown action {action!r} (one of {', '.join(EVENT_ACTIONS)})")
+        st = r.get(ev, "station", f"{p}.station", str, "")
+        if st and st not in {s.name for s in stations}:
+            raise r.fail(f"{p}.station", f"no station named {st!r}")
+        events.append(Event(r.number(ev, "t", f"{p}.t", lo=0.0), action,
+                            r.number(ev, "duration", f"{p}.duration", 0.0, 0.0), st,
+                            r.get(ev, "name", f"{p}.name", str, ""), r.number(ev, "value", f"{p}.value", 0.0)))
+    crit_raw = r.get(raw, "criteria", "criteria", dict, {})
+    crit = Criteria(
+        r.get(crit_raw, "return_started", "criteria.return_started", bool, None),
+        r.get(crit_raw, "link_regained", "criteria.link_regained", bool, None),
+        r.number(crit_raw, "max_final_target_error_m", "criteria.max_final_target_error_m", None, 0),
+        int(r.number(crit_raw, "max_collisions", "criteria.max_collisions", 0, 0)),
+        r.get(crit_raw, "max_displacement_respected", "criteria.max_displacement_respected", bool, True),
+        r.number(crit_raw, "min_distance_back_m", "criteria.min_distance_back_m", None, 0),
+        int(r.number(crit_raw, "min_commands_rejected", "criteria.min_commands_rejected", 0, 0)),
+        tuple(r.get(crit_raw, "chain_reasons", "criteria.chain_reasons", list, [])),
+    )
+    return Scenario(
+        name=name, description=r.get(raw, "description", "description", str, ""), file=file,
+        duration=r.number(raw, "duration", "duration", lo=1.0, hi=36000.0),
+        seed=r.get(raw, "seed", "seed", int, 1), vehicle=vehicle, bounds=tuple(float(c) for c in b),
+        walls=tuple(walls), denied=denied, stations=tuple(stations), radio=RadioSpec(**radio_kw),
+        start=(sx, sy, syaw), operator_station=op_station, teleop=teleop, route=route, resume_route=resume,
+        plan=tuple(plan), params=params, events=tuple(sorted(events, key=lambda e: e.t)), criteria=crit,
+    )
+
+
+def load(name_or_path: str) -> Scenario:
+    """A built-in scenario by name, or a TOML file by path."""
+    if name_or_path in BUILTIN:
+        text = resources.files("sim.scenarios").joinpath(f"{name_or_path}.toml").read_text(encoding="utf-8")
+        return parse(text, f"{name_or_path}.toml")
+    path = Path(name_or_path)
+    if not path.is_file():
+        raise ScenarioError(str(path), None, "", f"no such scenario file (built-in: {', '.join(BUILTIN)})")
+    return parse(path.read_text(encoding="utf-8"), str(path))

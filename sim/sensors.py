@@ -1,0 +1,52 @@
+"""Simulated sensors: position fixes, odometry and a drifting rate gyro. Seeded, so runs are deterministic."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim.robots import Robot
+from sim.world import World
+from vehicle.io import Fix, Readings
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    fix_hz: float = 5.0
+    fix_std: float = 0.5  # m
+    fix_dropout: float = 0.02  # chance a fix is missing even in the open
+    gyro_noise: float = 0.01  # rad/s
+    gyro_bias0: float = 0.005  # rad/s initial bias std
+    gyro_bias_walk: float = 0.0005  # rad/s per sqrt(s)
+    heading_hz: float = 10.0  # absolute heading reference (visual/lidar odometry), works underground too
+    heading_std: float = 0.03  # rad
+
+
+class Sensors:
+    def __init__(self, robot: Robot, world: World, rng: np.random.Generator, spec: SensorSpec = SensorSpec()) -> None:
+        self.robot, self.world, self.rng, self.spec = robot, world, rng, spec
+        self.bias = rng.normal(0.0, spec.gyro_bias0)
+        self._next_fix = 0.0
+        self._next_heading = 0.0
+        self.fixes = 0
+        self.denied_ticks = 0
+
+    def read(self, t: float, dt: float) -> Readings:
+        s, r = self.spec, self.rng
+        self.bias += r.normal(0.0, s.gyro_bias_walk * np.sqrt(dt))
+        gyro = self.robot.body.angular_velocity + self.bias + r.normal(0.0, s.gyro_noise)
+        fix = None
+        if t + 1e-9 >= self._next_fix:
+            self._next_fix = t + 1.0 / s.fix_hz
+            x, y, _ = self.robot.pose
+            if self.world.gps_denied(x, y):
+                self.denied_ticks += 1
+            elif r.random() >= s.fix_dropout:
+                fix = Fix(x + r.normal(0.0, s.fix_std), y + r.normal(0.0, s.fix_std), s.fix_std)
+                self.fixes += 1
+        heading = None
+        if t + 1e-9 >= self._next_heading:
+            self._next_heading = t + 1.0 / s.heading_hz
+            heading = self.robot.pose[2] + r.normal(0.0, s.heading_std)
+        return Readings(t, self.robot.odometry_speed(dt), float(gyro), fix, heading, s.heading_std)

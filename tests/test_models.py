@@ -1,0 +1,92 @@
+"""Robot models, sensors, estimator and path following in simulation (no MAVLink, no radio)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from sim import scenario
+from sim.drive import Rig
+from sim.robots import Legged, Rover
+from sim.world import World
+from vehicle.returning import Target, plan_route
+
+
+@pytest.mark.parametrize("name", ["loop", "tunnel"])
+@pytest.mark.parametrize("vehicle", ["rover", "legged"])
+def test_follows_the_reversed_route_end_to_end_without_a_collision(name, vehicle):
+    s = scenario.load(name)
+    rig = Rig(s, vehicle)
+    assert rig.drive_route()
+    p = rig.estimator.pose
+    route = plan_route(rig.trail, (p.x, p.y), Target.ORIGIN, 1000.0, link_lost=False)
+    assert route.length > 40.0
+    assert rig.drive(route.points[1:], 1.0, timeout=400.0)
+    x, y, _ = rig.robot.pose
+    assert math.hypot(x - s.start[0], y - s.start[1]) < 2.5
+    assert rig.world.collisions == 0
+
+
+def test_walls_are_real_collisions_and_are_counted():
+    from sim.world import Wall
+
+    world = World((Wall(((5.0, -5.0), (5.0, 5.0)), 0.5, 10.0),))
+    robot = Rover(world, 0.0, 0.0, 0.0, np.random.default_rng(0))
+    for _ in range(400):
+        robot.command(1.5, 0.0)
+        robot.before_step(0.02)
+        world.step(0.02)
+        robot.after_step(0.02)
+    assert robot.pose[0] < 5.0 - 0.25 - 0.35 + 0.05  # it stops at the wall, not inside it
+    assert world.collisions == 1  # one contact, however long it lasts
+    assert world.attenuation_db((0.0, 0.0), (10.0, 0.0)) == 10.0
+    assert world.attenuation_db((0.0, 0.0), (0.0, 3.0)) == 0.0
+
+
+def test_legged_speed_is_bounded_by_stride_and_step_frequency():
+    world = World(())
+    robot = Legged(world, 0.0, 0.0, 0.0, np.random.default_rng(0))
+    s = robot.spec
+    reach = math.sqrt((s.upper_leg + s.lower_leg) ** 2 - s.hip_height**2)
+    top = 2 * reach * s.stride_margin * s.max_step_hz / 2
+    for _ in range(500):
+        robot.command(5.0, 0.0)
+        robot.before_step(0.02)
+        world.step(0.02)
+        robot.after_step(0.02)
+    assert robot.true_speed <= top + 1e-6
+    assert robot.true_speed > 0.9 * top
+    assert robot.step_hz == s.max_step_hz
+    assert robot.steps > 0  # touchdowns happened, each with its own slip
+    fx, _ = zip(*robot.feet, strict=True)
+    assert max(fx) > robot.pose[0]  # front feet placed ahead of the body
+
+
+def test_estimator_beats_raw_fixes_in_the_open():
+    s = scenario.load("open")
+    rig = Rig(s, "rover")
+    rig.drive(np.array([[80.0, 0.0]]), 1.5, timeout=200.0)
+    raw = float(np.sqrt(np.mean(np.square(rig.log.fix_err))))
+    assert rig.log.rmse() < 0.6 * raw
+
+
+def test_dead_reckoning_drift_is_bounded_and_covariance_grows_across_a_denied_stretch():
+    s = scenario.load("tunnel")
+    rig = Rig(s, "legged")
+    rig.drive(np.array([[38.0, 0.0]]), 1.0, timeout=200.0)
+    inside = [k for k, (x, y) in enumerate(rig.log.true) if rig.world.gps_denied(x, y)]
+    assert len(inside) > 1000
+    std = np.array(rig.log.std)[inside]
+    assert std[-1] > 2 * std[0]  # honestly growing uncertainty
+    err = np.hypot(*(np.array(rig.log.true)[inside] - np.array(rig.log.est)[inside]).T)
+    assert err.max() < 2.0  # over ~35 m without a fix
+    assert err.max() < 3 * std.max()  # and the filter knows roughly how wrong it is
+
+
+def test_sensors_and_runs_are_deterministic():
+    a, b = Rig(scenario.load("loop"), "legged"), Rig(scenario.load("loop"), "legged")
+    for rig in (a, b):
+        rig.drive(np.array([[20.0, 0.0]]), 1.0, timeout=60.0)
+    assert a.log.est == b.log.est and a.log.true == b.log.true

@@ -1,0 +1,39 @@
+"""The boundary between the vehicle software and a robot: what a driver reads and what it is told to do.
+
+A real robot's driver implements ``RobotDriver`` over its wheels or legs and its sensors; the simulator implements
+it over pymunk. The vehicle loop sees nothing else of the robot.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+
+@dataclass(frozen=True)
+class Fix:
+    """A position fix in the local frame (x north, y east), with its 1-sigma error."""
+
+    x: float
+    y: float
+    std: float
+
+
+@dataclass(frozen=True)
+class Readings:
+    """One control tick's sensor data."""
+
+    t: float
+    speed: float  # odometry forward speed, m/s
+    yaw_rate: float  # rate gyro, rad/s (clockwise positive, NED)
+    fix: Fix | None
+    heading: float | None = None  # absolute heading (compass, lidar or visual odometry), rad
+    heading_std: float = 0.05
+
+
+class RobotDriver(Protocol):
+    mav_type: int
+
+    def command(self, speed: float, yaw_rate: float) -> None: ...
+
+    def read(self, t: float, dt: float) -> Readings: ...
