@@ -1,0 +1,120 @@
+"""The auto-return service driving a simulated robot: blocks complete, give up or get stuck as DESIGN §6 says."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sim import scenario
+from sim.drive import Rig
+from vehicle.lease import ExpireReason
+from vehicle.params import Params
+from vehicle.service import (
+    LEASE_BOUNDARY,
+    NAV_LOITER_TIME,
+    NAV_RETURN_TO_LAUNCH,
+    NAV_RETURN_TO_LINK,
+    PlanItem,
+    blocks_from_items,
+    default_plan,
+    displacement,
+    start,
+    step,
+)
+
+
+def run_block(rig, block, params, link_lost=True, limit=600.0):
+    p = rig.estimator.pose
+    res = start(block, p.x, p.y, rig.t, rig.trail, params, link_lost, 1.2)
+    max_disp = 0.0
+    end = rig.t + limit
+    while res.finished is None and rig.t < end:
+        p = rig.estimator.pose
+        res = step(res.state, p.x, p.y, p.yaw, rig.t, rig.trail, params, link_lost, 1.2)
+        rig.step(res.speed, res.yaw_rate)
+        q = rig.estimator.pose
+        max_disp = max(max_disp, displacement(res.state, q.x, q.y))
+    return res, max_disp
+
+
+def outbound(name="tunnel", vehicle="rover"):
+    s = scenario.load(name)
+    rig = Rig(s, vehicle)
+    gcs = s.stations[0]
+
+    def los(x, y):
+        return rig.world.attenuation_db((gcs.x, gcs.y), (x, y)) < 20.0
+
+    assert rig.drive_route(link_good=los)
+    return s, rig
+
+
+def test_plan_splits_at_boundaries_and_rejects_unknown_items():
+    params = Params()
+    items = [PlanItem(NAV_RETURN_TO_LINK, 50), PlanItem(LEASE_BOUNDARY), PlanItem(NAV_LOITER_TIME, 60),
+             PlanItem(LEASE_BOUNDARY), PlanItem(NAV_RETURN_TO_LAUNCH)]
+    blocks = blocks_from_items(items, params)
+    assert [b.payload[0].command for b in blocks] == [NAV_RETURN_TO_LINK, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH]
+    assert blocks[0].halt_on_regain
+    assert not blocks_from_items([PlanItem(NAV_RETURN_TO_LINK, param4=1)], params)[0].halt_on_regain
+    try:
+        blocks_from_items([PlanItem(22)], params)
+    except ValueError as e:
+        assert "item 0" in str(e)
+    else:
+        raise AssertionError("a takeoff item must be refused")
+
+
+def test_return_to_link_reaches_the_last_good_crumb_in_the_tunnel():
+    s, rig = outbound()
+    good = rig.trail.link_good()
+    target = rig.trail.points()[int(np.flatnonzero(good)[-1])]
+    res, _ = run_block(rig, default_plan(Params())[0], Params())
+    assert res.finished is ExpireReason.COMPLETED
+    p = rig.estimator.pose
+    assert math.hypot(p.x - target[0], p.y - target[1]) <= Params()["RTL_ARRIVE_R"] + 0.5
+    assert rig.world.collisions == 0
+
+
+def test_return_never_exceeds_max_displacement():
+    s, rig = outbound()
+    params = Params()
+    block = blocks_from_items([PlanItem(NAV_RETURN_TO_LINK, 8.0)], params)[0]
+    res, max_disp = run_block(rig, block, params)
+    assert res.finished is ExpireReason.COMPLETED
+    assert max_disp <= 8.0 + 0.3  # stopped on the boundary (FIG. 4C), within the arrival tolerance
+
+
+def test_fallback_chain_loiter_then_retrace_home():
+    s, rig = outbound("loop")
+    params = Params()
+    loiter, home = blocks_from_items([PlanItem(NAV_LOITER_TIME, 5.0), PlanItem(LEASE_BOUNDARY),
+                                      PlanItem(NAV_RETURN_TO_LAUNCH)], params)
+    t0 = rig.t
+    res, disp = run_block(rig, loiter, params)
+    # holding: only braking from the outbound speed and fix noise move the estimate
+    assert res.finished is ExpireReason.COMPLETED and 5.0 <= rig.t - t0 < 5.2 and disp < 0.5
+    res, _ = run_block(rig, home, params)
+    assert res.finished is ExpireReason.COMPLETED
+    x, y, _ = rig.robot.pose
+    assert math.hypot(x - s.start[0], y - s.start[1]) < 2.0
+
+
+def test_timeout_and_stuck():
+    s, rig = outbound()
+    params = Params()
+    params.set("RTL_MAX_TIME", 5.0)
+    res, _ = run_block(rig, default_plan(params)[0], params)
+    assert res.finished is ExpireReason.TIMEOUT
+
+
+
+def test_stuck_against_a_wall():
+    # a waypoint straight through the end of the drift: the quadruped presses against it and its leg odometry sees no progress
+    # (a rover's wheels would spin and its odometry would believe it arrived: see the note on wheel slip)
+    s, rig = outbound(vehicle="legged")
+    params = Params()
+    block = blocks_from_items([PlanItem(16, x=61.2, y=21.2)], params)[0]
+    res, _ = run_block(rig, block, params, limit=120.0)
+    assert res.finished is ExpireReason.STUCK
