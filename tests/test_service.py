@@ -111,7 +111,8 @@ def test_timeout_and_stuck():
 
 
 def test_stuck_against_a_wall():
-    # a waypoint straight through the end of the drift: the quadruped presses against it and its leg odometry sees no progress
+    # a waypoint straight through the end of the drift: the quadruped presses against the rock and its leg
+    # odometry sees no progress
     # (a rover's wheels would spin and its odometry would believe it arrived: see the note on wheel slip)
     s, rig = outbound(vehicle="legged")
     params = Params()
