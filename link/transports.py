@@ -1,0 +1,95 @@
+"""Byte transports between ground stations and the vehicle: real UDP, and an in-process lockstep queue.
+
+Both carry real MAVLink bytes; neither parses them. The lockstep transport delivers at simulated times, so a
+scripted ground station and the vehicle can run as fast as the machine allows and stay deterministic.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import heapq
+import socket
+from dataclasses import dataclass, field
+
+Address = tuple[str, int]
+
+
+class UdpTransport:
+    """One UDP socket. ``udpin``: bound, answers whoever talks to it; ``udpout``: also sends to fixed peers
+    (as SITLs send to 127.0.0.1:14550 and :14540 before anyone has spoken)."""
+
+    def __init__(self, bind: Address = ("127.0.0.1", 0), peers: tuple[Address, ...] = (),
+                 max_peers: int = 16) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        self.sock.bind(bind)
+        self.sock.setblocking(False)
+        self.fixed = list(peers)
+        self.learned: list[Address] = []
+        self.max_peers = max_peers
+
+    @property
+    def address(self) -> Address:
+        host, port = self.sock.getsockname()
+        return host, port
+
+    def receive(self, max_packets: int = 256) -> list[tuple[bytes, Address]]:
+        out = []
+        for _ in range(max_packets):
+            try:
+                data, addr = self.sock.recvfrom(65535)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:  # ICMP port unreachable from a peer that went away
+                continue
+            if addr not in self.fixed and addr not in self.learned:
+                self.learned.append(addr)
+                del self.learned[: -self.max_peers]
+            out.append((data, addr))
+        return out
+
+    def send(self, data: bytes, to: Address | None = None) -> None:
+        for addr in [to] if to else [*self.fixed, *self.learned]:
+            # nobody listening there (yet) is fine: UDP telemetry is fire and forget
+            with contextlib.suppress(OSError):
+                self.sock.sendto(data, addr)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+@dataclass(order=True)
+class _Packet:
+    at: float
+    seq: int
+    dst: str = field(compare=False)
+    src: str = field(compare=False)
+    data: bytes = field(compare=False)
+
+
+class LockstepBus:
+    """Named endpoints exchanging bytes at simulated times. A delay (and whether a packet arrives at all) is
+    decided by the sender's caller, e.g. the radio model; equal times keep send order."""
+
+    def __init__(self) -> None:
+        self._queue: list[_Packet] = []
+        self._seq = 0
+        self.delivered = 0
+
+    def send(self, src: str, dst: str, data: bytes, at: float) -> None:
+        self._seq += 1
+        heapq.heappush(self._queue, _Packet(at, self._seq, dst, src, data))
+
+    def receive(self, dst: str, now: float) -> list[tuple[bytes, str]]:
+        """Every packet for ``dst`` due by ``now`` (other endpoints' packets stay queued)."""
+        due, keep = [], []
+        while self._queue and self._queue[0].at <= now:
+            p = heapq.heappop(self._queue)
+            (due if p.dst == dst else keep).append(p)
+        for p in keep:
+            heapq.heappush(self._queue, p)
+        self.delivered += len(due)
+        return [(p.data, p.src) for p in due]
+
+    def pending(self) -> int:
+        return len(self._queue)
