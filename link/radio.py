@@ -1,0 +1,82 @@
+"""Simulated radio: what a packet between a ground-station antenna and the robot goes through.
+
+Log-distance path loss, the attenuation of every wall on the line of sight (from the world's segment queries),
+spatially correlated log-normal shadowing, and a noise floor give an RSSI; a logistic curve around the receiver
+sensitivity turns RSSI into a per-packet delivery probability; latency has a base and a jitter. Both directions
+use the same geometry (a reciprocal channel) but draw their own packet fates. Seeded, so runs repeat exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class RadioParams:
+    ref_loss_db: float = 40.0  # path loss at 1 m (2.4 GHz free space is ~40 dB)
+    exponent: float = 2.2
+    shadowing_db: float = 3.0
+    shadowing_corr_m: float = 3.0
+    noise_floor_dbm: float = -95.0
+    sensitivity_dbm: float = -90.0  # 50 % delivery
+    fade_width_db: float = 3.0
+    latency_ms: float = 20.0
+    jitter_ms: float = 5.0
+
+
+@dataclass(frozen=True)
+class LinkState:
+    rssi_dbm: float
+    noise_dbm: float
+    delivery: float  # probability a packet gets through
+
+
+def rssi_to_radio_status(rssi_dbm: float) -> int:
+    """RADIO_STATUS rssi as SiK radios report it: 0..254 (dBm = value / 1.9 - 127), 255 = unknown."""
+    return int(max(0, min(254, round((rssi_dbm + 127.0) * 1.9))))
+
+
+class Radio:
+    def __init__(self, params: RadioParams, attenuation: Callable[[tuple[float, float], tuple[float, float]], float],
+                 seed: int) -> None:
+        self.p = params
+        self.attenuation = attenuation
+        self.rng = np.random.default_rng(seed)
+        self._shadow = 0.0
+        self._shadow_at: tuple[float, float] | None = None
+        self.sent = 0
+        self.lost = 0
+
+    def _shadowing(self, x: float, y: float) -> float:
+        """Gauss-Markov along the robot's path: correlated over ``shadowing_corr_m`` metres of travel."""
+        if self._shadow_at is None:
+            self._shadow = self.rng.normal(0.0, self.p.shadowing_db)
+        else:
+            d = math.hypot(x - self._shadow_at[0], y - self._shadow_at[1])
+            if d > 0:
+                rho = math.exp(-d / self.p.shadowing_corr_m)
+                self._shadow = rho * self._shadow + math.sqrt(1 - rho * rho) * self.rng.normal(0.0, self.p.shadowing_db)
+        self._shadow_at = (x, y)
+        return self._shadow
+
+    def link(self, antenna: tuple[float, float], power_dbm: float, robot: tuple[float, float]) -> LinkState:
+        """Channel state between an antenna and the robot; call once per control tick."""
+        d = max(1.0, math.hypot(robot[0] - antenna[0], robot[1] - antenna[1]))
+        loss = self.p.ref_loss_db + 10.0 * self.p.exponent * math.log10(d)
+        loss += self.attenuation(antenna, robot)
+        rssi = power_dbm - loss + self._shadowing(*robot)
+        snr_margin = rssi - max(self.p.sensitivity_dbm, self.p.noise_floor_dbm + 5.0)
+        delivery = 1.0 / (1.0 + math.exp(-snr_margin / max(1e-6, self.p.fade_width_db / 4.0)))
+        return LinkState(rssi, self.p.noise_floor_dbm, delivery)
+
+    def packet(self, state: LinkState) -> float | None:
+        """The fate of one packet: its latency in seconds, or None if it is lost."""
+        self.sent += 1
+        if self.rng.random() >= state.delivery:
+            self.lost += 1
+            return None
+        return max(0.0, self.p.latency_ms + self.rng.normal(0.0, self.p.jitter_ms)) / 1000.0
