@@ -13,6 +13,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from link.radio import RadioParams
 from sim.world import Station, Wall, World
 
 if sys.version_info >= (3, 11):
@@ -30,22 +31,6 @@ class ScenarioError(ValueError):
         self.file, self.line, self.field = file, line, fld
         where = f"{file}:{line}" if line else file
         super().__init__(f"{where}: {fld}: {message}" if fld else f"{where}: {message}")
-
-
-@dataclass(frozen=True)
-class RadioSpec:
-    """Log-distance path loss + walls + shadowing (used by link/radio)."""
-
-    frequency_mhz: float = 2400.0
-    ref_loss_db: float = 40.0  # loss at 1 m
-    exponent: float = 2.2
-    shadowing_db: float = 3.0
-    shadowing_corr_m: float = 3.0
-    noise_floor_dbm: float = -95.0
-    sensitivity_dbm: float = -90.0  # 50 % packet delivery
-    fade_width_db: float = 3.0  # how sharply delivery falls around the sensitivity
-    latency_ms: float = 20.0
-    jitter_ms: float = 5.0
 
 
 @dataclass(frozen=True)
@@ -94,7 +79,7 @@ class Scenario:
     walls: tuple[Wall, ...]
     denied: tuple[tuple[tuple[float, float], ...], ...]
     stations: tuple[Station, ...]
-    radio: RadioSpec
+    radio: RadioParams
     start: tuple[float, float, float]
     operator_station: str
     teleop: str
@@ -231,12 +216,11 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
         raise r.fail("world.stations", "needs at least one ground station")
     radio_raw = r.get(raw, "radio", "radio", dict, {})
     radio_kw = {}
-    for fname, default in RadioSpec.__dataclass_fields__.items():
+    for fname in RadioParams.__dataclass_fields__:
         if fname in radio_raw:
             radio_kw[fname] = r.number(radio_raw, fname, f"radio.{fname}")
-        del default
     for k in radio_raw:
-        if k not in RadioSpec.__dataclass_fields__:
+        if k not in RadioParams.__dataclass_fields__:
             raise r.fail(f"radio.{k}", "unknown radio field")
     start_raw = r.get(raw, "start", "start", dict)
     sx, sy = r.point(r.get(start_raw, "position", "start.position", list), "start.position")
@@ -296,7 +280,7 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
         name=name, description=r.get(raw, "description", "description", str, ""), file=file,
         duration=r.number(raw, "duration", "duration", lo=1.0, hi=36000.0),
         seed=r.get(raw, "seed", "seed", int, 1), vehicle=vehicle, bounds=tuple(float(c) for c in b),
-        walls=tuple(walls), denied=denied, stations=tuple(stations), radio=RadioSpec(**radio_kw),
+        walls=tuple(walls), denied=denied, stations=tuple(stations), radio=RadioParams(**radio_kw),
         start=(sx, sy, syaw), operator_station=op_station, teleop=teleop, route=route, resume_route=resume,
         plan=tuple(plan), params=params, events=tuple(sorted(events, key=lambda e: e.t)), criteria=crit,
     )
