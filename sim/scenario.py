@@ -15,6 +15,14 @@ from typing import Any
 
 from link.radio import RadioParams
 from sim.world import Station, Wall, World
+from vehicle.service import (
+    LEASE_BOUNDARY,
+    NAV_LOITER_TIME,
+    NAV_RETURN_TO_LAUNCH,
+    NAV_RETURN_TO_LINK,
+    NAV_WAYPOINT,
+    PlanItem,
+)
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -22,7 +30,9 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 BUILTIN = ("tunnel", "warehouse", "loop", "open", "handover")
-PLAN_COMMANDS = ("RETURN_TO_LINK", "BOUNDARY", "LOITER", "RETURN_TO_LAUNCH", "WAYPOINT")
+# scenario names for the mission items of a return plan
+PLAN_COMMANDS = {"RETURN_TO_LINK": NAV_RETURN_TO_LINK, "BOUNDARY": LEASE_BOUNDARY, "LOITER": NAV_LOITER_TIME,
+                 "RETURN_TO_LAUNCH": NAV_RETURN_TO_LAUNCH, "WAYPOINT": NAV_WAYPOINT}
 EVENT_ACTIONS = ("jam", "unjam", "kill_gcs", "revive_gcs", "takeover", "rtl", "param", "claim", "stop")
 
 
@@ -31,18 +41,6 @@ class ScenarioError(ValueError):
         self.file, self.line, self.field = file, line, fld
         where = f"{file}:{line}" if line else file
         super().__init__(f"{where}: {fld}: {message}" if fld else f"{where}: {message}")
-
-
-@dataclass(frozen=True)
-class PlanItem:
-    command: str
-    max_displacement: float = 0.0
-    speed: float = 0.0
-    target: int = -1
-    on_regain: int = -1
-    time: float = 0.0
-    x: float = 0.0
-    y: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -245,12 +243,18 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
         cmd = r.get(it, "command", f"{p}.command", str)
         if cmd not in PLAN_COMMANDS:
             raise r.fail(f"{p}.command", f"unknown plan command {cmd!r} (one of {', '.join(PLAN_COMMANDS)})")
-        plan.append(PlanItem(cmd, r.number(it, "max_displacement", f"{p}.max_displacement", 0.0, 0, 10000),
-                             r.number(it, "speed", f"{p}.speed", 0.0, 0, 5), int(r.number(it, "target", f"{p}.target",
-                                                                                       -1, -1, 2)),
-                             int(r.number(it, "on_regain", f"{p}.on_regain", -1, -1, 1)),
-                             r.number(it, "time", f"{p}.time", 0.0, 0, 3600), r.number(it, "x", f"{p}.x", 0.0),
-                             r.number(it, "y", f"{p}.y", 0.0)))
+        num = PLAN_COMMANDS[cmd]
+        if num == NAV_RETURN_TO_LINK:
+            plan.append(PlanItem(num, r.number(it, "max_displacement", f"{p}.max_displacement", 0.0, 0, 10000),
+                                 r.number(it, "speed", f"{p}.speed", 0.0, 0, 5),
+                                 r.number(it, "target", f"{p}.target", -1.0, -1, 2),
+                                 r.number(it, "on_regain", f"{p}.on_regain", -1.0, -1, 1)))
+        elif num == NAV_LOITER_TIME:
+            plan.append(PlanItem(num, r.number(it, "time", f"{p}.time", lo=0, hi=3600)))
+        elif num == NAV_WAYPOINT:
+            plan.append(PlanItem(num, x=r.number(it, "x", f"{p}.x"), y=r.number(it, "y", f"{p}.y")))
+        else:
+            plan.append(PlanItem(num))
     params_raw = r.get(op, "params", "operator.params", dict, {})
     params = {k: r.number(params_raw, k, f"operator.params.{k}") for k in params_raw}
     events = []

@@ -67,3 +67,12 @@ def test_toml_syntax_error_has_a_line():
 def test_missing_file():
     with pytest.raises(ScenarioError, match="no such scenario file"):
         scenario.load("/nonexistent/x.toml")
+
+
+def test_scenario_plan_is_a_return_plan_mission():
+    from vehicle.params import Params
+    from vehicle.service import NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_RETURN_TO_LINK, blocks_from_items
+
+    blocks = blocks_from_items(scenario.load("tunnel").plan, Params())
+    assert [b.payload[0].command for b in blocks] == [NAV_RETURN_TO_LINK, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH]
+    assert blocks[0].payload[0].param1 == 60.0 and blocks[1].payload[0].param1 == 30.0
