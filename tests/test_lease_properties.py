@@ -229,5 +229,5 @@ class LeaseMachine(RuleBasedStateMachine):
 TestLeaseMachine = LeaseMachine.TestCase
 TestLeaseMachine.settings = settings(
     max_examples=2500, stateful_step_count=40, deadline=None, suppress_health_check=list(HealthCheck),
-    derandomize=False, print_blob=True,
+    print_blob=True,
 )
