@@ -15,25 +15,27 @@ def frame(seq_sys: int = 1) -> bytes:
     return rl.MAVLink_heartbeat_message(10, 8, 0, 0, 4, 3).pack(mav)
 
 
+def receive_within(transport: UdpTransport, seconds: float = 1.0):
+    """Poll a non-blocking socket for a bounded time (loopback delivery is not instant)."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        got = transport.receive()
+        if got:
+            return got
+        time.sleep(0.01)
+    return []
+
+
 def test_udp_answers_whoever_talks_to_it():
     vehicle = UdpTransport(("127.0.0.1", 0))
     gcs = UdpTransport(("127.0.0.1", 0), peers=(vehicle.address,))
     try:
         gcs.send(frame(255))
-        got = []
-        for _ in range(100):
-            got = vehicle.receive()
-            if got:
-                break
-            time.sleep(0.01)
+        got = receive_within(vehicle)
         assert got and got[0][1] == gcs.address
         vehicle.send(frame(1))  # to every learned peer
-        back = []
-        for _ in range(100):
-            back = gcs.receive()
-            if back:
-                break
-            time.sleep(0.01)
+        back = receive_within(gcs)
+        assert back
         msgs = rl.MAVLink(None).parse_buffer(back[0][0])
         assert msgs[0].get_type() == "HEARTBEAT" and msgs[0].get_srcSystem() == 1
     finally:

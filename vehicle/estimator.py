@@ -86,7 +86,7 @@ class Estimator:
         qv, qw, qb = (c.speed_noise**2) * dt, (c.gyro_noise**2) * dt, (c.bias_walk**2) * dt
         cs, sn = math.cos(yaw), math.sin(yaw)
         f.Q = np.array([[qv * cs * cs, qv * cs * sn, 0, 0], [qv * cs * sn, qv * sn * sn, 0, 0],
-                        [0, 0, qw, 0], [0, 0, 0, qb]]) * 1.0
+                        [0, 0, qw, 0], [0, 0, 0, qb]])
         f.predict(u=np.array([speed, yaw_rate, dt]))
         self.t = t
 

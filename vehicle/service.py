@@ -11,10 +11,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 from vehicle.lease import ExpireReason, ServiceBlock
 from vehicle.navigation import FollowerConfig, Path, follow
 from vehicle.params import Params
-from vehicle.returning import Route, Target, plan_route
+from vehicle.returning import Route, Target, plan_route, truncate
 from vehicle.trail import Trail
 
 # MAV_CMD numbers of the items a plan may hold
@@ -131,8 +133,6 @@ def _next_item(st: ServiceState, x: float, y: float, t: float, trail: Trail, par
         route = plan_route(trail, (x, y), Target.ORIGIN, math.inf, link_lost)
         max_disp = math.inf
     elif it.command == NAV_WAYPOINT:
-        import numpy as np
-
         route = Route(np.array([[x, y], [it.x, it.y]]), (it.x, it.y), -1, False)
         max_disp = math.inf
     path = Path(route.points) if route is not None and len(route.points) >= 2 else None
@@ -142,8 +142,6 @@ def _next_item(st: ServiceState, x: float, y: float, t: float, trail: Trail, par
 
 
 def _bounded_from(route: Route, center: tuple[float, float], radius: float) -> Route:
-    from vehicle.returning import truncate
-
     pts, cut = truncate(route.points, center, radius)
     return replace(route, points=pts, truncated=route.truncated or cut)
 
