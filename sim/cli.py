@@ -26,6 +26,37 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _scenario(name: str):
+    from sim.scenario import ScenarioError, load
+
+    try:
+        return load(name)
+    except (ScenarioError, OSError) as e:
+        print(f"returnlink: error: {e}", file=sys.stderr)
+        raise SystemExit(2) from None
+
+
+def _cmd_sim_run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from sim import metrics, report
+    from sim.runner import Run, write_metrics, write_tlog
+
+    sc = _scenario(args.scenario)
+    kind = args.vehicle or sc.vehicle
+    seed = sc.seed if args.seed is None else args.seed
+    out = Path(args.out) if args.out else Path("out") / f"{sc.name}-{kind}-{seed}"
+    print(f"returnlink: running {sc.name} with the {kind} (seed {seed}), {sc.duration:g} simulated s",
+          file=sys.stderr)
+    run = Run(sc, kind, seed, progress=not args.quiet).run()
+    m = run.metrics = metrics.compute(run)
+    paths = [write_metrics(m, out / "metrics.json"), write_tlog(run, out / "run.tlog"),
+             report.trajectory(run, out / "trajectory.png"), report.timeline(run, out / "timeline.png")]
+    print(metrics.summary(run, m))
+    print("  wrote " + ", ".join(str(p) for p in paths))
+    return 0 if m["passed"] else 1
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="returnlink", description="Lease-based automated return to link for MAVLink robots.")
@@ -35,6 +66,14 @@ def build_parser() -> argparse.ArgumentParser:
     d.set_defaults(func=_cmd_dialect)
     demo = sub.add_parser("demo", help="the default demonstration")
     demo.set_defaults(func=_cmd_demo)
+    sim = sub.add_parser("sim", help="the simulator").add_subparsers(dest="sim_command", required=True)
+    run = sim.add_parser("run", help="run a scenario in lockstep, as fast as possible")
+    run.add_argument("scenario", help="a built-in scenario name or a .toml file")
+    run.add_argument("--seed", type=int, help="random seed (default: the scenario's)")
+    run.add_argument("--vehicle", choices=["rover", "legged"], help="robot model (default: the scenario's)")
+    run.add_argument("--out", help="output directory (default: out/SCENARIO-VEHICLE-SEED)")
+    run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.set_defaults(func=_cmd_sim_run)
     return p
 
 

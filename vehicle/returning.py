@@ -116,8 +116,30 @@ def truncate(route: np.ndarray, center: tuple[float, float], radius: float) -> t
     return np.array(out), False
 
 
+def _beyond(pts: np.ndarray, goal: int, dist: float) -> list[np.ndarray]:
+    """Points continuing from kept point ``goal`` back toward the trail's start for ``dist`` metres."""
+    out: list[np.ndarray] = []
+    i, left = goal, dist
+    while i > 0 and left > 1e-9:
+        a, b = pts[i], pts[i - 1]
+        seg = float(np.hypot(*(b - a)))
+        if seg >= left:
+            out.append(a + (b - a) * (left / seg))
+            break
+        out.append(b)
+        left -= seg
+        i -= 1
+    return out
+
+
 def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_displacement: float,
-               link_lost: bool, heading: float = 0.0) -> Route:
+               link_lost: bool, heading: float = 0.0, overshoot: float = 0.0) -> Route:
+    """The whole planning step: target, retraced route, displacement bound.
+
+    ``overshoot`` extends a LINK route that far past the target crumb, further back along the trail: the
+    navigator counts as arrived within RTL_ARRIVE_R of the route's end, and a return that stops that short of
+    the last place the operator was heard stops on the fringe of coverage, not inside it.
+    """
     """The whole planning step: target, retraced route, displacement bound."""
     if target is Target.HEADING:
         s = np.asarray(start, dtype=float)
@@ -130,5 +152,9 @@ def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_dis
         return Route(np.array([s]), None, -1, False)
     full = retrace(trail, start, goal)
     gx, gy = full[-1]
+    if overshoot > 0 and target is Target.LINK and link_lost:
+        extra = _beyond(trail.points(), goal, overshoot)
+        if extra:
+            full = np.vstack([full, extra])
     pts, cut = truncate(full, start, max_displacement)
     return Route(pts, (float(gx), float(gy)), goal, cut)

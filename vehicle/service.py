@@ -39,6 +39,7 @@ class PlanItem:
     param4: float = -1.0
     x: float = 0.0
     y: float = 0.0
+    seq: int = -1  # position in the uploaded mission, for MISSION_CURRENT / MISSION_ITEM_REACHED
 
 
 def blocks_from_items(items: list[PlanItem] | tuple[PlanItem, ...], params: Params) -> tuple[ServiceBlock, ...]:
@@ -56,7 +57,7 @@ def blocks_from_items(items: list[PlanItem] | tuple[PlanItem, ...], params: Para
             continue
         if it.command not in SUPPORTED:
             raise ValueError(f"item {k}: command {it.command} is not supported in a return plan")
-        current.append(it)
+        current.append(replace(it, seq=k))
     if current:
         blocks.append(_block(current, params))
     return tuple(blocks)
@@ -126,7 +127,8 @@ def _next_item(st: ServiceState, x: float, y: float, t: float, trail: Trail, par
         target = Target(int(it.param3)) if it.param3 >= 0 else Target(int(params["RTL_TARGET"]))
         # the displacement budget is measured from where the block started
         remaining = max(0.0, max_disp - math.hypot(x - st.start[0], y - st.start[1]))
-        route = plan_route(trail, (x, y), target, remaining, link_lost, heading=math.radians(it.x))
+        route = plan_route(trail, (x, y), target, remaining, link_lost, heading=math.radians(it.x),
+                           overshoot=params["RTL_ARRIVE_R"])
         if target is not Target.HEADING:
             route = _bounded_from(route, st.start, max_disp)
     elif it.command == NAV_RETURN_TO_LAUNCH:

@@ -1,0 +1,116 @@
+"""Return plans on the ground: QGC WPL 110 files and a short text form (``rtl:50 | loiter:30 | launch``).
+
+A plan is a list of ``vehicle.missions.Item`` in the MISSION_ITEM_INT form, exactly what goes over the wire.
+"""
+
+from __future__ import annotations
+
+import math
+
+from vehicle.missions import GLOBAL_FRAMES, LOCAL_FRAMES, MISSION_FRAME, Item, Origin
+from vehicle.service import LEASE_BOUNDARY, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_RETURN_TO_LINK, NAV_WAYPOINT
+
+WPL_HEADER = "QGC WPL 110"
+
+
+class PlanError(ValueError):
+    pass
+
+
+def item(seq: int, command: int, p1: float = 0.0, p2: float = 0.0, p3: float = 0.0, p4: float = 0.0,
+         frame: int = MISSION_FRAME, x: int = 0, y: int = 0) -> Item:
+    return Item(seq, frame, command, 0, 1, p1, p2, p3, p4, x, y, 0.0, 0)
+
+
+def parse_spec(text: str, origin: Origin | None = None) -> list[Item]:
+    """``rtl[:disp[:speed[:target]]] | loiter:seconds | launch | wp:north:east``, blocks separated by ``|``."""
+    items: list[Item] = []
+    for k, block in enumerate(text.split("|")):
+        if k:
+            items.append(item(len(items), LEASE_BOUNDARY))
+        for word in block.split():
+            name, *args = word.split(":")
+            try:
+                nums = [float(a) for a in args]
+            except ValueError:
+                raise PlanError(f"{word!r}: arguments must be numbers") from None
+            if name == "rtl" and len(nums) <= 3:
+                p = nums + [0.0, 0.0, -1.0][len(nums):]
+                items.append(item(len(items), NAV_RETURN_TO_LINK, p[0], p[1], p[2], -1.0))
+            elif name == "loiter" and len(nums) == 1:
+                items.append(item(len(items), NAV_LOITER_TIME, nums[0]))
+            elif name == "launch" and not nums:
+                items.append(item(len(items), NAV_RETURN_TO_LAUNCH))
+            elif name == "wp" and len(nums) == 2:
+                items.append(item(len(items), NAV_WAYPOINT, frame=1, x=round(nums[0] * 1e4), y=round(nums[1] * 1e4)))
+            else:
+                raise PlanError(f"{word!r}: expected rtl[:disp[:speed[:target]]], loiter:S, launch or wp:N:E")
+    if not items:
+        raise PlanError("empty plan")
+    return items
+
+
+def read_wpl(text: str, source: str = "<plan>") -> list[Item]:
+    """QGC WPL 110: a header line, then ``seq current frame command p1 p2 p3 p4 x y z autocontinue``."""
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    if not lines or not lines[0].startswith("QGC WPL"):
+        raise PlanError(f"{source}:1: not a QGC WPL file (expected '{WPL_HEADER}')")
+    items = []
+    for n, line in enumerate(lines[1:], 2):
+        f = line.replace(",", " ").split()
+        if len(f) != 12:
+            raise PlanError(f"{source}:{n}: expected 12 fields, got {len(f)}")
+        try:
+            seq, cur, frame, cmd = (int(v) for v in f[:4])
+            p1, p2, p3, p4, x, y, z = (float(v) for v in f[4:11])
+            auto = int(f[11])
+        except ValueError as e:
+            raise PlanError(f"{source}:{n}: {e}") from None
+        if seq != len(items):
+            raise PlanError(f"{source}:{n}: item {seq} out of sequence (expected {len(items)})")
+        scale = 1e7 if frame in GLOBAL_FRAMES else (1e4 if frame in LOCAL_FRAMES else 1.0)
+        if not (math.isfinite(x) and math.isfinite(y)):
+            raise PlanError(f"{source}:{n}: position is not a number")
+        items.append(Item(seq, frame, cmd, cur, auto, p1, p2, p3, p4, round(x * scale), round(y * scale), z, 0))
+    return items
+
+
+def write_wpl(items: list[Item]) -> str:
+    out = [WPL_HEADER]
+    for it in items:
+        scale = 1e7 if it.frame in GLOBAL_FRAMES else (1e4 if it.frame in LOCAL_FRAMES else 1.0)
+        out.append("\t".join(str(v) for v in (
+            it.seq, it.current, it.frame, it.command, f"{it.param1:g}", f"{it.param2:g}", f"{it.param3:g}",
+            f"{it.param4:g}", f"{it.x / scale:.8f}", f"{it.y / scale:.8f}", f"{it.z:g}", it.autocontinue)))
+    return "\n".join(out) + "\n"
+
+
+NAMES = {NAV_RETURN_TO_LINK: "RETURN_TO_LINK", LEASE_BOUNDARY: "LEASE_BOUNDARY", NAV_LOITER_TIME: "LOITER_TIME",
+         NAV_RETURN_TO_LAUNCH: "RETURN_TO_LAUNCH", NAV_WAYPOINT: "WAYPOINT"}
+
+
+def describe(items: list[Item]) -> str:
+    lines = []
+    lease = 0
+    for it in items:
+        if it.command == LEASE_BOUNDARY:
+            lease += 1
+            lines.append(f"{it.seq:3d}  ---- lease boundary ----")
+            continue
+        name = NAMES.get(it.command, f"CMD {it.command}")
+        detail = {NAV_RETURN_TO_LINK: f"max disp {it.param1:g} m, speed {it.param2:g} m/s, target {it.param3:g}",
+                  NAV_LOITER_TIME: f"{it.param1:g} s"}.get(it.command, "")
+        lines.append(f"{it.seq:3d}  block {lease}  {name:<17} {detail}")
+    return "\n".join(lines)
+
+
+def from_plan_items(plan) -> list[Item]:
+    """Local ``vehicle.service.PlanItem``s (a scenario's plan) -> mission items to upload."""
+    out = []
+    for k, p in enumerate(plan):
+        if p.command == NAV_WAYPOINT:
+            out.append(item(k, p.command, p.param1, p.param2, p.param3, p.param4, frame=1,
+                            x=round(p.x * 1e4), y=round(p.y * 1e4)))
+        else:
+            out.append(item(k, p.command, p.param1, p.param2, p.param3, p.param4))
+    return out

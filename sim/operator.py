@@ -1,0 +1,119 @@
+"""The scripted operator: a person at a ground station, written as a small state machine over ``gcs``.
+
+It only knows what a real operator's screen shows (telemetry and lease status that reached it over the radio),
+never the simulator's truth: it takes control, uploads the return plan, arms, drives the route by steering the
+reported position toward each waypoint, stops pushing when its telemetry goes stale, and when the vehicle is
+back and waiting for a claim it claims the fresh lease and drives the resume route.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from gcs.station import GroundStation, Pending, Transfer, mav
+from vehicle.missions import Item
+
+STALE_TELEMETRY = 1.0  # s: an operator stops pushing the stick when the picture freezes
+WAYPOINT_RADIUS = 1.5  # m
+
+
+@dataclass
+class Leg:
+    points: tuple[tuple[float, float, float], ...]
+    index: int = 0
+
+    @property
+    def done(self) -> bool:
+        return self.index >= len(self.points)
+
+
+class Operator:
+    def __init__(self, gs: GroundStation, route, resume_route, plan: list[Item], teleop: str = "velocity") -> None:
+        self.gs = gs
+        self.plan = plan
+        self.teleop = teleop
+        self.leg = Leg(tuple(route))
+        self.resume = Leg(tuple(resume_route))
+        self.phase = "connect"
+        self.pending: Pending | None = None
+        self.transfer: Transfer | None = None
+        self.claims = 0
+        self.log: list[tuple[float, str]] = []
+
+    def _say(self, t: float, text: str) -> None:
+        self.log.append((t, text))
+
+    def step(self, t: float) -> None:
+        gs, v = self.gs, self.gs.vehicle
+        fresh = v.last_heard is not None and t - v.last_heard < STALE_TELEMETRY
+        st = v.status
+        if self.phase == "connect":
+            if v.last_heard is not None and st is not None:
+                self.pending = gs.acquire()
+                self.phase = "acquiring"
+            return
+        if self.phase == "acquiring":
+            if self.pending and self.pending.done:
+                if self.pending.ok:
+                    self._say(t, f"in control, epoch {self.pending.param2}")
+                    self.transfer = gs.upload(self.plan) if self.plan else None
+                    self.phase = "uploading"
+                else:
+                    self.phase = "connect"
+            return
+        if self.phase == "uploading":
+            if self.transfer is None or self.transfer.done:
+                if self.transfer is not None:
+                    self._say(t, f"plan upload {'accepted' if self.transfer.ok else 'failed'}")
+                self.pending = gs.arm(True)
+                self.phase = "arming"
+            return
+        if self.phase == "arming":
+            if self.pending and self.pending.done:
+                self.phase = "driving" if self.pending.ok else "arming-retry"
+                if not self.pending.ok:
+                    self.pending = gs.arm(True)
+                    self.phase = "arming"
+            return
+        if st is None:
+            return
+        if st.state == mav.RETURNLINK_STATE_AWAITING_CLAIM and st.owner == gs.sysid and fresh:
+            if self.pending is None or self.pending.done:
+                self.pending = gs.claim(-1)
+                self.claims += 1
+                self._say(t, f"claiming [{st.epoch},{st.current}]")
+                if self.phase == "driving" and not self.leg.done:
+                    self.phase = "resuming"
+            return
+        if st.state != mav.RETURNLINK_STATE_TELEOP or st.owner != gs.sysid or not fresh:
+            gs.stop_streaming() if not fresh else gs.stop()
+            return
+        if self.phase == "driving" and not self.leg.done:
+            self._drive(self.leg)
+        elif self.phase in ("driving", "resuming") and self.leg.done and not self.resume.done and self.claims:
+            self.phase = "resuming"
+            self._drive(self.resume)
+        elif self.phase == "resuming" and not self.resume.done:
+            self._drive(self.resume)
+        else:
+            gs.stop()
+
+    def _drive(self, leg: Leg) -> None:
+        gs, v = self.gs, self.gs.vehicle
+        if v.position is None:
+            return
+        x, y, speed = leg.points[leg.index]
+        dn, de = x - v.position[0], y - v.position[1]
+        d = math.hypot(dn, de)
+        if d < WAYPOINT_RADIUS:
+            leg.index += 1
+            if leg.done:
+                gs.stop()
+            return
+        s = min(speed, 0.6 * d + 0.3)
+        if self.teleop == "manual":
+            err = (math.atan2(de, dn) - v.yaw + math.pi) % (2 * math.pi) - math.pi
+            gs.drive_manual(s / 2.0 * max(0.0, math.cos(err)), max(-1.0, min(1.0, 1.6 * err)))
+        else:
+            gs.drive_velocity(s * dn / d, s * de / d)

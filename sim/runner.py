@@ -1,0 +1,308 @@
+"""``returnlink sim run``: one scenario in lockstep, as fast as the machine allows.
+
+Every tick: radio deliveries due -> ground stations and vehicle parse real MAVLink bytes -> timed events and the
+scripted operator -> the vehicle loop -> physics -> every frame either side sent goes through the radio model
+(per-packet loss and latency, both directions) onto a lockstep bus. Nothing reads the wall clock except the
+real-time-factor figure, so the same scenario and seed give the same metrics.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gcs.plans import from_plan_items
+from gcs.station import GroundStation, mav
+from link.radio import LinkState, Radio, rssi_to_radio_status
+from link.transports import LockstepBus
+from sim.driver import SimDriver
+from sim.operator import Operator
+from sim.scenario import Scenario
+from vehicle.app import DT, Vehicle
+from vehicle.lease import Holder
+from vehicle.mavlink import Endpoint
+from vehicle.params import load_defaults
+
+RADIO_SYSID, RADIO_COMPID = 51, 68  # what SiK telemetry radios use for their RADIO_STATUS
+
+
+@dataclass
+class StationSim:
+    """One ground station in the simulation: its library instance, antenna and whether it is running."""
+
+    name: str
+    gs: GroundStation
+    antenna: tuple[float, float]
+    power_dbm: float
+    alive: bool
+    state: LinkState | None = None
+    operator: Operator | None = None
+
+
+@dataclass
+class Trace:
+    """Per-tick record for metrics and plots."""
+
+    t: list[float] = field(default_factory=list)
+    true: list[tuple[float, float]] = field(default_factory=list)
+    est: list[tuple[float, float]] = field(default_factory=list)
+    holder: list[int] = field(default_factory=list)
+    index: list[int] = field(default_factory=list)
+    state: list[int] = field(default_factory=list)
+    link: list[float] = field(default_factory=list)  # delivery probability to the operator's station
+    rssi: list[float] = field(default_factory=list)
+    heard: list[bool] = field(default_factory=list)  # owner heard within LNK_GOOD_S (the vehicle's view)
+    owner: list[int] = field(default_factory=list)
+
+
+@dataclass
+class BlockRecord:
+    """One return block as it ran, in true positions."""
+
+    index: int
+    started: float
+    start: tuple[float, float]
+    target: tuple[float, float] | None = None
+    max_disp_allowed: float = math.inf
+    ended: float | None = None
+    end: tuple[float, float] | None = None
+    reason: str = ""
+    route: np.ndarray | None = None
+    route_obj: object = None
+    distance: float = 0.0
+    max_disp: float = 0.0
+
+
+class Run:
+    def __init__(self, scenario: Scenario, vehicle: str | None = None, seed: int | None = None,
+                 progress: bool = False) -> None:
+        self.scenario = sc = scenario
+        self.kind = vehicle or sc.vehicle
+        self.seed = sc.seed if seed is None else seed
+        rng = np.random.default_rng(self.seed)
+        self.driver = SimDriver(sc, self.kind, rng)
+        self.world = self.driver.world
+        params = load_defaults()
+        for k, v in sc.params.items():
+            params.set(k, v)
+        self.vehicle = Vehicle(self.driver, params, sc.start, 0.0, seed=self.seed)
+        self.endpoint = Endpoint(self.vehicle)
+        self.radio = Radio(sc.radio, self.world.attenuation_db, self.seed + 1)
+        self.radio_mav = mav.MAVLink(None, RADIO_SYSID, RADIO_COMPID)
+        self.bus = LockstepBus()
+        self.stations: dict[str, StationSim] = {}
+        for s in sc.stations:
+            gs = GroundStation(s.sysid, 190)
+            self.stations[s.name] = StationSim(s.name, gs, (s.x, s.y), s.power_dbm, s.name == sc.operator_station)
+        op = self.stations[sc.operator_station]
+        op.operator = Operator(op.gs, sc.route, sc.resume_route, from_plan_items(sc.plan), sc.teleop)
+        self.events = sorted(sc.events, key=lambda e: e.t)
+        self.jams: list[tuple[float, float, str]] = []  # (from, until, station or "")
+        self.t = 0.0
+        self.trace = Trace()
+        self.blocks: list[BlockRecord] = []
+        self.tlog: list[bytes] = []
+        self.progress = progress
+        self.wall = 0.0
+        self.stopped = False
+        self.metrics: dict | None = None
+        self.next_radio_status = 0.0
+        self.regains: list[tuple[float, float | None]] = []  # (LINK_REGAINED time, start of the contact run)
+        self.losses: list[tuple[float, float | None]] = []  # (COMMS_LOST time, owner last heard before it)
+
+    # ----- the loop ------------------------------------------------------------------------------------------
+    def run(self) -> Run:
+        w0 = time.perf_counter()
+        n = int(round(self.scenario.duration / DT))
+        shown = -1
+        for k in range(n):
+            self.step()
+            if self.stopped:
+                break
+            if self.progress and (pct := 100 * (k + 1) // n) != shown and pct % 2 == 0:
+                shown = pct
+                bar = "#" * (pct // 4) + "." * (25 - pct // 4)
+                print(f"\r  [{bar}] {pct:3d}%  t={self.t:6.1f} s", end="", file=sys.stderr, flush=True)
+        if self.progress:
+            print(file=sys.stderr)
+        self.wall = time.perf_counter() - w0
+        self._close_block()
+        return self
+
+    def step(self) -> None:
+        self.t = t = round(self.t + DT, 9)
+        v, ep = self.vehicle, self.endpoint
+        for data, _src in self.bus.receive("vehicle", t):
+            ep.receive(data, t)
+        for st in self.stations.values():
+            for data, _src in self.bus.receive(st.name, t):
+                if st.alive:
+                    st.gs.feed(data, t)
+                    if st.operator is not None:
+                        self._log_frame(data, t)
+        self._events(t)
+        for st in self.stations.values():
+            if st.alive and st.operator is not None:
+                st.operator.step(t)
+        n_events, heard = len(v.event_log), v.book.link.last_heard
+        v.tick(t)
+        for e in v.event_log[n_events:]:
+            if e.reason.name == "COMMS_LOST":
+                self.losses.append((e.t, heard))
+            elif e.reason.name == "LINK_REGAINED":
+                self.regains.append((e.t, v.book.link.contact_since))
+        self.driver.advance(DT)
+        pos = self.driver.pose[:2]
+        for st in self.stations.values():
+            st.state = self.radio.link(st.antenna, st.power_dbm, pos) if st.alive else None
+        for data in ep.tick(t):
+            for st in self.stations.values():
+                self._transmit(st, "vehicle", st.name, data, t)
+        for st in self.stations.values():
+            if not st.alive:
+                continue
+            for data in st.gs.tick(t):
+                if st.operator is not None:
+                    self._log_frame(data, t)
+                self._transmit(st, st.name, "vehicle", data, t)
+        if t >= self.next_radio_status:
+            self.next_radio_status = t + 1.0
+            self._radio_status(t)
+        self._record(t, pos)
+
+    def _jammed(self, station: str, t: float) -> bool:
+        return any(a <= t < b and (not s or s == station) for a, b, s in self.jams)
+
+    def _transmit(self, st: StationSim, src: str, dst: str, data: bytes, t: float) -> None:
+        if st.state is None or self._jammed(st.name, t):
+            return
+        latency = self.radio.packet(st.state)
+        if latency is not None:
+            self.bus.send(src, dst, data, t + latency)
+
+    def _radio_status(self, t: float) -> None:
+        """The operator's telemetry radio reports both ends' RSSI, as a SiK radio would."""
+        op = self.stations[self.scenario.operator_station]
+        if not op.alive or op.state is None:
+            return
+        rssi = 0 if self._jammed(op.name, t) else rssi_to_radio_status(op.state.rssi_dbm)
+        noise = rssi_to_radio_status(op.state.noise_dbm)
+        msg = self.radio_mav.radio_status_encode(rssi, rssi, 100, noise, noise, 0, 0)
+        data = msg.pack(self.radio_mav)
+        op.gs.feed(data, t)
+        self._log_frame(data, t)
+
+    def _log_frame(self, data: bytes, t: float) -> None:
+        self.tlog.append(struct.pack(">Q", int(t * 1e6)) + data)
+
+    # ----- timed events --------------------------------------------------------------------------------------
+    def _events(self, t: float) -> None:
+        while self.events and self.events[0].t <= t + 1e-9:
+            ev = self.events.pop(0)
+            name = ev.station or self.scenario.operator_station
+            st = self.stations.get(name)
+            if ev.action == "jam":
+                self.jams.append((ev.t, ev.t + (ev.duration or math.inf), ev.station))
+            elif ev.action == "unjam":
+                self.jams = [(a, min(b, t), s) for a, b, s in self.jams]
+            elif ev.action == "kill_gcs" and st is not None:
+                st.alive = False
+            elif ev.action == "revive_gcs" and st is not None:
+                st.alive = True
+                # a station coming back resumes what it was doing: its stale lease and its old stream
+                st.gs.t = t
+                if st.gs.teleop is None:
+                    st.gs.drive_velocity(0.5, 0.0)
+            elif ev.action == "takeover" and st is not None:
+                st.alive = True
+                st.gs.acquire(allow_takeover=False)
+            elif ev.action == "rtl" and st is not None:
+                st.gs.rtl()
+            elif ev.action == "claim" and st is not None:
+                st.gs.claim(-1)
+            elif ev.action == "param" and st is not None:
+                st.gs.param_set(ev.name, ev.value)
+            elif ev.action == "stop":
+                self.stopped = True
+
+    # ----- recording -----------------------------------------------------------------------------------------
+    def _record(self, t: float, pos: tuple[float, float]) -> None:
+        v, tr = self.vehicle, self.trace
+        p = v.estimator.pose
+        cur = v.book.current
+        op = self.stations[self.scenario.operator_station]
+        tr.t.append(t)
+        tr.true.append((float(pos[0]), float(pos[1])))
+        tr.est.append((p.x, p.y))
+        tr.holder.append(int(cur.holder) if cur else 0)
+        tr.index.append(cur.index if cur else -1)
+        tr.state.append(v.state())
+        jammed = self._jammed(op.name, t)
+        tr.link.append(0.0 if op.state is None or jammed else op.state.delivery)
+        tr.rssi.append(math.nan if op.state is None else op.state.rssi_dbm)
+        tr.heard.append(v.link_good(t))
+        tr.owner.append(v.book.owner or 0)
+        returning = cur is not None and cur.holder is Holder.RETURN_SERVICE
+        blk = self.blocks[-1] if self.blocks and self.blocks[-1].ended is None else None
+        if blk is not None and (not returning or cur.index != blk.index):
+            self._close_block()
+            blk = None
+        if returning and blk is None:
+            st = v.service
+            target = st.route.target if st is not None and st.route is not None else None
+            blk = BlockRecord(cur.index, t, (float(pos[0]), float(pos[1])), target,
+                              st.max_displacement if st is not None else math.inf)
+            self.blocks.append(blk)
+        if blk is not None:
+            if len(tr.true) > 1:
+                a, b = tr.true[-2], tr.true[-1]
+                blk.distance += math.hypot(b[0] - a[0], b[1] - a[1])
+            blk.max_disp = max(blk.max_disp, math.hypot(pos[0] - blk.start[0], pos[1] - blk.start[1]))
+            st = v.service
+            if st is not None and st.route is not None and st.route is not blk.route_obj:
+                blk.route_obj = st.route
+                blk.route = st.route.points if blk.route is None else np.vstack([blk.route, st.route.points])
+                if blk.target is None:
+                    blk.target = st.route.target
+                    blk.max_disp_allowed = st.max_displacement
+
+    def _close_block(self) -> None:
+        if not self.blocks or self.blocks[-1].ended is not None:
+            return
+        blk = self.blocks[-1]
+        blk.ended = self.t
+        blk.end = self.trace.true[-1] if self.trace.true else blk.start
+        for ev in self.vehicle.event_log:
+            if ev.expired == blk.index and ev.t >= blk.started - 1e-9:
+                blk.reason = ev.reason.name
+                break
+
+    # ----- outputs -------------------------------------------------------------------------------------------
+    def true_at(self, t: float) -> tuple[float, float]:
+        """True position at simulated time ``t`` (nearest recorded tick)."""
+        k = min(len(self.trace.t) - 1, max(0, int(round(t / DT)) - 1))
+        return self.trace.true[k]
+
+    @property
+    def lease_events(self) -> list[dict]:
+        return [{"t": round(e.t, 3), "expired": e.expired, "current": e.current, "reason": e.reason.name}
+                for e in self.vehicle.event_log]
+
+
+def write_tlog(run: Run, path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(b"".join(run.tlog))
+    return path
+
+
+def write_metrics(metrics: dict, path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
+    return path

@@ -1,0 +1,433 @@
+"""The vehicle loop: one 50 Hz tick wires the lease book, estimator, trail, auto-return service and actuators.
+
+``Vehicle`` is everything onboard except MAVLink framing; ``vehicle.mavlink.Endpoint`` translates messages into
+its methods. Time is always an argument and the robot is reached only through ``RobotDriver``, so the same code
+runs lockstep in the simulator, in real time over UDP, or on a real robot. ``run`` is the imperative shell: a clock
+and a transport are passed in.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+from vehicle.estimator import Estimator
+from vehicle.io import Readings, RobotDriver
+from vehicle.lease import (
+    Check,
+    ExpireReason,
+    Holder,
+    LeaseBook,
+    LeaseConfig,
+    LeaseEvent,
+    LeaseId,
+    Outcome,
+    QueuedCommand,
+    RejectReason,
+    Verdict,
+)
+from vehicle.params import Params
+from vehicle.service import (
+    NAV_LOITER_TIME,
+    NAV_WAYPOINT,
+    PlanItem,
+    ServiceState,
+    blocks_from_items,
+    default_plan,
+)
+from vehicle.service import displacement as block_displacement
+from vehicle.service import start as start_block
+from vehicle.service import step as step_block
+from vehicle.trail import Crumb, Trail, TrailConfig
+
+DT = 0.02  # the control tick: 50 Hz
+SETPOINT_TTL = 0.5  # s: a teleop setpoint not refreshed this long is dropped (dead-man)
+MAX_TELEOP_SPEED = 2.0  # m/s at full stick
+MAX_TELEOP_YAW_RATE = 1.2  # rad/s at full stick
+GOOD_LINK_QUALITY = 0.8  # share of the owner's packets arriving (from MAVLink sequence gaps) for a link-good crumb
+QUALITY_TAU = 1.0  # s: time constant of the link-quality estimate
+
+
+@dataclass
+class LinkQuality:
+    """Share of one sender's packets that arrive, from the gaps in its MAVLink sequence numbers.
+
+    "Heard within LNK_GOOD_S" alone tags the fringe of coverage as good, where one lucky packet in five gets
+    through; a return target there does not bring the link back. Sequence gaps are what any radio link shows.
+    """
+
+    received: float = 0.0
+    lost: float = 0.0
+    last_seq: int | None = None
+    at: float = 0.0
+
+    def update(self, seq: int, t: float) -> None:
+        decay = math.exp(-max(0.0, t - self.at) / QUALITY_TAU)
+        self.received, self.lost, self.at = self.received * decay, self.lost * decay, t
+        gap = 0 if self.last_seq is None else (seq - self.last_seq - 1) % 256
+        if gap < 128:  # a larger jump is a reorder or a restart, not loss
+            self.lost += gap
+        self.received += 1
+        self.last_seq = seq
+
+    def value(self, t: float) -> float:
+        total = self.received + self.lost
+        return 1.0 if total <= 0 else self.received / total
+
+
+class State:
+    """RETURNLINK_STATE."""
+
+    NO_OWNER, TELEOP, AWAITING_CLAIM, RETURNING, HOLDING, NAVIGATING = range(6)
+
+
+@dataclass(frozen=True)
+class Setpoint:
+    """A teleop request, bound to the lease it was sent under: it dies with that lease."""
+
+    speed: float
+    yaw_rate: float
+    lease: LeaseId
+    until: float
+
+
+def lease_config(params: Params) -> LeaseConfig:
+    return LeaseConfig(link_timeout=params["LNK_TIMEOUT"], regain_s=params["LNK_REGAIN_S"],
+                       contact_gap=params["LNK_GOOD_S"], rearm=bool(params["RTL_REARM"]),
+                       autogrant=bool(params["LEASE_AUTOGRANT"]), stale_take=bool(params["LEASE_STALE_TAKE"]))
+
+
+def trail_config(params: Params) -> TrailConfig:
+    return TrailConfig(spacing=params["TRL_SPACING"], tolerance=params["TRL_TOL"],
+                       loop_distance=params["TRL_LOOP_D"], max_points=int(params["TRL_MAX_PTS"]))
+
+
+class Vehicle:
+    """The onboard state machine around the pure parts. Mutable: it is the shell that owns the current book."""
+
+    def __init__(self, driver: RobotDriver, params: Params, pose: tuple[float, float, float], t: float = 0.0,
+                 seed: int = 0) -> None:
+        self.driver = driver
+        self.params = params
+        self.seed = seed
+        x, y, yaw = pose
+        self.home = (x, y)
+        self.estimator = Estimator(x, y, yaw, t, pos_std=0.3, yaw_std=0.02)
+        self.trail = Trail(trail_config(params))
+        self.book = LeaseBook(lease_config(params), plan=default_plan(params))
+        self.plan_items: tuple[PlanItem, ...] = ()  # the uploaded return plan (empty: the default plan)
+        self.t = t
+        self.armed = False
+        self.setpoint: Setpoint | None = None
+        self.service: ServiceState | None = None
+        self.service_index: int | None = None
+        self.service_sub: LeaseId | None = None
+        self.outbound_speed = 0.0
+        self.readings: Readings | None = None
+        self.quality: dict[int, LinkQuality] = {}
+        self.last_fix: tuple[float, float] | None = None  # the last fix used, for GPS_RAW_INT
+        self.last_fix_t: float | None = None
+        self.command_out = (0.0, 0.0)
+        # everything the endpoint must announce, drained by it each tick
+        self.events: list[LeaseEvent] = []
+        self.event_log: list[LeaseEvent] = []  # every transition since boot, for the record
+        self.notices: list[str] = []
+        self.reached: list[int] = []  # plan items reached (MISSION_ITEM_REACHED)
+        # counters for the record: rejections are never silent, stale executions must stay 0
+        self.commands_rejected = 0
+        self.stale_commands_executed = 0
+        self.dropped_commands = 0
+
+    # ----- lease transitions -------------------------------------------------------------------------------
+    def _apply(self, out: Outcome) -> None:
+        self.book = out.book
+        self.events.extend(out.events)
+        self.event_log.extend(out.events)
+        for ev in out.events:
+            self.notices.append(ev.describe())
+        self.dropped_commands += len(out.dropped)
+        for q in out.released:
+            self._execute(q.payload, q.lease, q.sender)
+
+    def _reject(self, chk: Check) -> Check:
+        self.commands_rejected += 1
+        return chk
+
+    def admit(self, sender: int, compid: int, t: float) -> None:
+        """A plain client's state-changing command may grant it the root (LEASE_AUTOGRANT)."""
+        self._apply(self.book.admit(sender, compid, t, self.seed))
+
+    def heard(self, sysid: int, t: float, seq: int | None = None) -> None:
+        self.book = self.book.heard(sysid, t)
+        if seq is not None:
+            self.quality.setdefault(sysid, LinkQuality()).update(seq, t)
+
+    def acquire(self, sender: int, compid: int, t: float, allow_takeover: bool) -> Check:
+        if not self.book.may_take(sender, t):
+            return self._reject(Check(Verdict.REJECT, None, RejectReason.NOT_IN_CONTROL,
+                                      f"owned by GCS {self.book.owner}; takeover not allowed"))
+        if self.book.owner == sender:
+            self.book = replace(self.book, takeover_allowed=allow_takeover)
+            return Check(Verdict.EXECUTE, self.book.current_id)
+        self._apply(self.book.acquire(sender, compid, t, self.seed, allow_takeover))
+        self.setpoint = None
+        return Check(Verdict.EXECUTE, self.book.current_id)
+
+    def release(self, sender: int, t: float) -> Check:
+        if self.book.owner != sender:
+            return self._reject(Check(Verdict.REJECT, None, RejectReason.NOT_IN_CONTROL, "not the owner"))
+        self._apply(self.book.release(sender, t))
+        self.setpoint = None
+        return Check(Verdict.EXECUTE)
+
+    def claim(self, sender: int, epoch: int, index: int, t: float) -> Check:
+        out, chk = self.book.claim(sender, epoch, index, t)
+        self._apply(out)
+        return chk if chk.executes else self._reject(chk)
+
+    def expire(self, sender: int, epoch: int, index: int, t: float) -> Check:
+        out, chk = self.book.expire(sender, epoch, index, t)
+        self._apply(out)
+        return chk if chk.executes else self._reject(chk)
+
+    def rtl(self, sender: int, compid: int, t: float) -> Check:
+        """RTL button or RTL mode: OPERATOR_EXPIRE of the operator lease, so the return plan runs."""
+        self.admit(sender, compid, t)
+        out, chk = self.book.expire_current(sender, t)
+        self._apply(out)
+        return chk if chk.executes else self._reject(chk)
+
+    def take_manual(self, sender: int, compid: int, t: float) -> Check:
+        """A plain client switching to a manual mode (or HOLD) takes the operator lease back: it claims the
+        unclaimed operator lease, or a newer lease over a running return (NEWER_LEASE). Only the owner can."""
+        self.admit(sender, compid, t)
+        book = self.book
+        if book.owner is None or book.owner != sender or book.epoch is None:
+            return self._reject(Check(Verdict.REJECT, None, RejectReason.NOT_IN_CONTROL, "not the owner"))
+        cur = book.current
+        assert cur is not None
+        if cur.holder is Holder.OPERATOR and cur.claimed:
+            return book.check(sender) if book.claimed_by(sender) == book.current_id else self.claim(
+                sender, book.epoch, book.next_index, t)
+        return self.claim(sender, book.epoch, -1 if cur.holder is Holder.OPERATOR else book.next_index, t)
+
+    def command(self, sender: int, compid: int, t: float, payload: tuple) -> Check:
+        """A standard state-changing command under the sender's last claimed lease (DESIGN §3.4)."""
+        self.admit(sender, compid, t)
+        chk = self.book.check(sender)
+        if chk.verdict is Verdict.QUEUE and chk.lease is not None:
+            self.book = self.book.enqueue(QueuedCommand(chk.lease, sender, payload))
+            return chk
+        if not chk.executes:
+            return self._reject(chk)
+        self._execute(payload, chk.lease, sender)
+        return chk
+
+    def _execute(self, payload: tuple, lease: LeaseId | None, sender: int) -> None:
+        kind = payload[0]
+        if kind == "teleop" and lease is not None:
+            _, speed, yaw_rate = payload
+            self.setpoint = Setpoint(speed, yaw_rate, lease, self.t + SETPOINT_TTL)
+        elif kind == "hold":
+            self.setpoint = None
+        elif kind == "arm":
+            self.armed = bool(payload[1])
+            if not self.armed:
+                self.setpoint = None
+
+    def set_plan(self, items: tuple[PlanItem, ...], t: float) -> str | None:
+        """A mission upload is the return plan: scheduled as leases behind the operator lease. Returns why not."""
+        try:
+            blocks = blocks_from_items(items, self.params) if items else default_plan(self.params)
+        except ValueError as e:
+            return str(e)
+        if not blocks:
+            blocks = default_plan(self.params)
+        self.plan_items = tuple(items)
+        self._apply(self.book.schedule_plan(blocks, t))
+        return None
+
+    def return_now(self, items: tuple[PlanItem, ...], sender: int, compid: int, t: float) -> Check:
+        """MAV_CMD_NAV_RETURN_TO_LINK as a command: run these items as one return block now; the stored plan
+        stays the one re-armed afterwards."""
+        self.admit(sender, compid, t)
+        cur = self.book.current
+        if self.book.owner != sender or cur is None:
+            return self._reject(Check(Verdict.REJECT, None, RejectReason.NOT_IN_CONTROL, "not the owner"))
+        if cur.holder is not Holder.OPERATOR:
+            return Check(Verdict.EXECUTE, self.book.current_id, detail="a return is already running")
+        stored = self.book.plan
+        self._apply(self.book.schedule_plan(blocks_from_items(items, self.params), t))
+        self.book = replace(self.book, plan=stored)
+        return self.rtl(sender, compid, t)
+
+    def set_plan_start(self, seq: int, sender: int, compid: int, t: float) -> str | None:
+        """MISSION_SET_CURRENT / DO_SET_MISSION_CURRENT: the return plan is scheduled from the block holding
+        item ``seq`` on. Only while an operator lease is current, and only by the owner."""
+        if self.book.owner is not None and self.book.owner != sender:
+            self.commands_rejected += 1
+            return f"GCS {self.book.owner} is in control"
+        items = self.plan_items
+        if not 0 <= seq < max(1, len(items)):
+            return f"item {seq} does not exist"
+        cur = self.book.current
+        if cur is not None and cur.holder is not Holder.OPERATOR:
+            return "a return is running"
+        if not items:
+            return None
+        tail = tuple(it for it in items[seq:])
+        blocks = blocks_from_items(tail, self.params)
+        # keep the seq numbers of the whole mission
+        blocks = tuple(replace(b, payload=tuple(replace(it, seq=it.seq + seq) for it in b.payload)) for b in blocks)
+        stored = blocks_from_items(items, self.params)
+        self._apply(self.book.schedule_plan(blocks, t))
+        self.book = replace(self.book, plan=stored)
+        return None
+
+    def route_remaining(self) -> float:
+        st = self.service
+        if st is None or st.path is None:
+            return 0.0
+        return max(0.0, st.path.length - st.progress)
+
+    def set_param(self, name: str, value: float) -> float:
+        """Store a parameter (ParamError leaves the old value) and apply it to the rules at once."""
+        v = self.params.set(name, value)
+        self.book = self.book.with_config(lease_config(self.params))
+        if not self.plan_items and name.startswith("RTL_"):
+            self._apply(self.book.schedule_plan(default_plan(self.params), self.t))
+        return v
+
+    # ----- queries -----------------------------------------------------------------------------------------
+    def state(self) -> int:
+        cur = self.book.current
+        if cur is None:
+            return State.NO_OWNER
+        if cur.holder is Holder.OPERATOR:
+            return State.TELEOP if cur.claimed else State.AWAITING_CLAIM
+        st = self.service
+        if st is None or st.item < 0:
+            return State.RETURNING
+        command = st.items[st.item].command
+        if command == NAV_LOITER_TIME:
+            return State.HOLDING
+        return State.NAVIGATING if command == NAV_WAYPOINT else State.RETURNING
+
+    def link_good(self, t: float) -> bool:
+        owner = self.book.owner
+        age = self.book.link.age(t)
+        if owner is None or age is None or age > self.params["LNK_GOOD_S"]:
+            return False
+        q = self.quality.get(owner)
+        return q is None or q.value(t) >= GOOD_LINK_QUALITY
+
+    def displacement(self) -> float:
+        if self.service is None:
+            return 0.0
+        p = self.estimator.pose
+        return block_displacement(self.service, p.x, p.y)
+
+    # ----- the tick ----------------------------------------------------------------------------------------
+    def tick(self, t: float) -> tuple[float, float]:
+        """Sensors -> estimator -> trail; lease triggers; the current lease's commands -> actuators."""
+        dt = t - self.t
+        self.t = t
+        r = self.driver.read(t, max(dt, 1e-6))
+        self.readings = r
+        est = self.estimator
+        est.predict(r.speed, r.yaw_rate, t)
+        if r.heading is not None:
+            est.heading(r.heading, r.heading_std)
+        if r.fix is not None and est.fix(r.fix.x, r.fix.y, r.fix.std):
+            self.last_fix, self.last_fix_t = (r.fix.x, r.fix.y), t
+        p = est.pose
+        self.trail.add(Crumb(p.x, p.y, t, p.std, self.link_good(t)))
+
+        was_lost = self.book.link.lost
+        self._apply(self.book.tick(t))
+        if self.book.link.lost and not was_lost and self.book.link.last_heard is not None:
+            self.trail.mark_lost_since(self.book.link.last_heard)
+        speed, yaw_rate = self._control(t, p.x, p.y, p.yaw)
+        if not self.armed:
+            speed, yaw_rate = 0.0, 0.0
+        self.command_out = (speed, yaw_rate)
+        self.driver.command(speed, yaw_rate)
+        return speed, yaw_rate
+
+    def _control(self, t: float, x: float, y: float, yaw: float) -> tuple[float, float]:
+        book = self.book
+        cur = book.current
+        if cur is None or cur.holder is Holder.OPERATOR:
+            self.service, self.service_index, self.service_sub = None, None, None
+            return self._teleop(t)
+        self.setpoint = None
+        link_lost = book.link.lost
+        fresh = self.service is None or self.service_index != cur.index
+        if fresh:
+            step = start_block(cur.block, x, y, t, self.trail, self.params, link_lost, self.outbound_speed)
+            self.service_index = cur.index
+        else:
+            step = step_block(self.service, x, y, yaw, t, self.trail, self.params, link_lost, self.outbound_speed)
+        if step.replanned and book.current_id is not None:
+            if not fresh and self.service is not None:
+                self.reached.append(self.service.items[self.service.item].seq)
+            self.book, self.service_sub = self.book.issue_sublease(book.current_id)
+        self.service = step.state
+        if step.finished is not None:
+            st = step.state
+            if step.finished is ExpireReason.COMPLETED and 0 <= st.item < len(st.items):
+                self.reached.append(st.items[st.item].seq)
+            self._apply(self.book.finish(cur.index, step.finished, t))
+            return 0.0, 0.0
+        return step.speed, step.yaw_rate
+
+    def _teleop(self, t: float) -> tuple[float, float]:
+        sp = self.setpoint
+        if sp is None:
+            return 0.0, 0.0
+        if t > sp.until:
+            self.setpoint = None
+            return 0.0, 0.0
+        if self.book.check(self.book.owner or 0, sp.lease).verdict is not Verdict.EXECUTE:
+            # the lease this setpoint was sent under is gone: it must not drive the robot any more
+            self.setpoint = None
+            self.dropped_commands += 1
+            return 0.0, 0.0
+        if self.book.current_id is None or sp.lease.path[0] != self.book.current_id.path[0]:
+            self.stale_commands_executed += 1  # unreachable by construction; counted if it ever happens
+        if abs(sp.speed) > 0.2 and self.readings is not None:
+            self.outbound_speed += 0.02 * (abs(self.readings.speed) - self.outbound_speed)
+        return sp.speed, sp.yaw_rate
+
+
+def velocity_to_command(vn: float, ve: float, yaw_rate: float | None, yaw: float) -> tuple[float, float]:
+    """A NED velocity target for a unicycle: turn toward the velocity, drive the part of it along the heading."""
+    speed = math.hypot(vn, ve)
+    if speed < 1e-3:
+        return 0.0, yaw_rate or 0.0
+    err = (math.atan2(ve, vn) - yaw + math.pi) % (2 * math.pi) - math.pi
+    turn = max(-MAX_TELEOP_YAW_RATE, min(MAX_TELEOP_YAW_RATE, 2.0 * err)) if yaw_rate is None else yaw_rate
+    return speed * max(0.0, math.cos(err)), turn
+
+
+def run(vehicle: Vehicle, endpoint, clock: Callable[[], float], receive: Callable[[], list[bytes]],
+        send: Callable[[bytes], None], stop: Callable[[], bool], sleep: Callable[[float], None] = time.sleep,
+        speedup: float = 1.0, on_tick: Callable[[float], None] | None = None) -> None:
+    """The real-time shell: tick at 50 Hz of ``clock`` time (scaled by ``speedup``) until ``stop()``."""
+    t0 = clock()
+    n = 0
+    while not stop():
+        t = vehicle.t + DT
+        for data in receive():
+            endpoint.receive(data, t)
+        if on_tick is not None:
+            on_tick(t)
+        vehicle.tick(t)
+        for data in endpoint.tick(t):
+            send(data)
+        n += 1
+        wait = t0 + n * DT / speedup - clock()
+        if wait > 0:
+            sleep(wait)

@@ -1,0 +1,734 @@
+"""The MAVLink endpoint of the vehicle (DESIGN §4): bytes in, bytes out, nothing else.
+
+It parses frames with the generated ``returnlink`` dialect, enforces target ids, maps each standard message or
+command onto a ``Vehicle`` method (where the lease rules decide), answers every command exactly once, runs the
+mission and parameter protocols, and schedules telemetry. It owns no clock and no socket: ``receive(data, t)``
+and ``tick(t) -> [frames]`` are called by whatever loop drives the vehicle.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from link import dialect
+from vehicle.app import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, State, Vehicle, velocity_to_command
+from vehicle.lease import Check, ExpireReason, Holder, RejectReason, Verdict
+from vehicle.missions import ACCEPTED, DENIED, INVALID, UNSUPPORTED, Item, MissionServer, Origin, to_plan
+from vehicle.params import SPECS, ParamError, format_parm
+from vehicle.service import NAV_RETURN_TO_LINK, PlanItem
+
+mav = dialect.load()
+
+NO_INDEX = 65535
+RETRY_WINDOW = 3.0  # s: an identical command from the same sender within this is a retry, not a new command
+REJECT_NOTICE_GAP = 2.0  # s between STATUSTEXTs about a rejected stream (MANUAL_CONTROL, velocity targets)
+
+# PX4 custom_mode: main mode in bits 16-23, sub mode in bits 24-31
+PX4_MANUAL, PX4_POSCTL, PX4_AUTO = 1, 3, 4
+PX4_AUTO_LOITER, PX4_AUTO_MISSION, PX4_AUTO_RTL = 3, 4, 5
+# ArduPilot Rover mode numbers
+AP_MANUAL, AP_ACRO, AP_STEERING, AP_HOLD, AP_AUTO, AP_RTL, AP_SMART_RTL = 0, 1, 3, 4, 10, 11, 12
+
+HEALTH_SENSORS = (mav.MAV_SYS_STATUS_SENSOR_3D_GYRO | mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+                  | mav.MAV_SYS_STATUS_SENSOR_3D_MAG | mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+                  | mav.MAV_SYS_STATUS_PREARM_CHECK)
+CAPABILITIES = (mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+                | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+                | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mav.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
+                | mav.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
+                | mav.MAV_PROTOCOL_CAPABILITY_COMPONENT_ACCEPTS_GCS_CONTROL)
+
+# default telemetry intervals, s (changed with SET_MESSAGE_INTERVAL)
+DEFAULT_RATES = {
+    mav.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
+    mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
+    mav.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0,
+    mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 0.25,
+    mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 0.25,
+    mav.MAVLINK_MSG_ID_ATTITUDE: 0.25,
+    mav.MAVLINK_MSG_ID_HOME_POSITION: 5.0,
+    mav.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
+    mav.MAVLINK_MSG_ID_CONTROL_STATUS: 1.0,
+    mav.MAVLINK_MSG_ID_LEASE_STATUS: 0.5,
+}
+
+REJECT_RESULT = {
+    RejectReason.NOT_IN_CONTROL: mav.MAV_RESULT_NOT_IN_CONTROL,
+    RejectReason.WRONG_EPOCH: mav.MAV_RESULT_DENIED,
+    RejectReason.EXPIRED: mav.MAV_RESULT_DENIED,
+    RejectReason.INVALID: mav.MAV_RESULT_DENIED,
+}
+
+
+class _Sink:
+    """The file pymavlink's encoder writes finished frames to."""
+
+    def __init__(self) -> None:
+        self.frames: list[bytes] = []
+
+    def write(self, data: bytes) -> None:
+        self.frames.append(bytes(data))
+
+
+@dataclass
+class _Answered:
+    key: tuple
+    at: float
+    result: int
+    param2: int
+
+
+@dataclass
+class Counters:
+    frames: int = 0
+    bad_frames: int = 0
+    wrong_target: int = 0
+    commands: int = 0
+    command_retries: int = 0
+    unsupported: int = 0
+
+
+class Endpoint:
+    """MAVLink in, MAVLink out, for one ``Vehicle``."""
+
+    def __init__(self, vehicle: Vehicle, sysid: int = 1, compid: int = 1, origin: Origin | None = None,
+                 boot_t: float = 0.0, param_file: Path | None = None) -> None:
+        self.vehicle = vehicle
+        self.sysid, self.compid = sysid, compid
+        self.origin = origin or Origin()
+        self.boot_t = boot_t
+        self.param_file = param_file
+        self._sink = _Sink()
+        self.mav = mav.MAVLink(self._sink, sysid, compid)
+        self.parser = mav.MAVLink(None, 0, 0)
+        self.parser.robust_parsing = True
+        self.counters = Counters()
+        self.intervals = dict(DEFAULT_RATES)
+        self.due: dict[int, float] = {}
+        self.next_heartbeat = boot_t
+        self.answered: dict[tuple[int, int, int], _Answered] = {}
+        self.notice_at: dict[tuple[int, str], float] = {}
+        self.last_status_key: tuple | None = None
+        self.last_control_key: tuple | None = None
+        self.statustext_id = 0
+        self.missions = MissionServer(self._send, self._accept_mission)
+        self.t = boot_t
+        self.log: Callable[[str], None] | None = None
+
+    # ----- output --------------------------------------------------------------------------------------------
+    def _send(self, name: str, **fields) -> None:
+        getattr(self.mav, f"{name}_send")(**fields)
+
+    def statustext(self, text: str, severity: int = mav.MAV_SEVERITY_INFO) -> None:
+        """STATUSTEXT, split into 50-character chunks sharing an id when longer (MAVLink 2 chunking)."""
+        raw = text.encode("utf-8", "replace")
+        if len(raw) <= 50:
+            self.mav.statustext_send(severity, raw)
+            return
+        self.statustext_id = self.statustext_id % 65535 + 1
+        chunks = [raw[i:i + 50] for i in range(0, len(raw), 50)]
+        for n, chunk in enumerate(chunks):
+            self.mav.statustext_send(severity, chunk, id=self.statustext_id, chunk_seq=n)
+        if len(raw) % 50 == 0:
+            self.mav.statustext_send(severity, b"", id=self.statustext_id, chunk_seq=len(chunks))
+
+    def _boot_ms(self, t: float) -> int:
+        return int(max(0.0, t - self.boot_t) * 1000) & 0xFFFFFFFF
+
+    # ----- input ---------------------------------------------------------------------------------------------
+    def receive(self, data: bytes, t: float) -> None:
+        """Parse and handle whatever frames ``data`` holds; garbage is counted and dropped."""
+        self.t = t
+        try:
+            msgs = self.parser.parse_buffer(data) or []
+        except Exception:  # noqa: BLE001 - a hostile byte stream must never take the vehicle down
+            self.counters.bad_frames += 1
+            self.parser = mav.MAVLink(None, 0, 0)
+            self.parser.robust_parsing = True
+            return
+        for m in msgs:
+            self.handle(m, t)
+
+    def handle(self, m, t: float) -> None:
+        if m.get_type() == "BAD_DATA":
+            self.counters.bad_frames += 1
+            return
+        sender, scomp = m.get_srcSystem(), m.get_srcComponent()
+        if sender == self.sysid or sender == 0:
+            return  # our own frames echoed back, or an anonymous sender
+        self.counters.frames += 1
+        if not self._for_us(m):
+            self.counters.wrong_target += 1
+            return
+        self.vehicle.heard(sender, t, m.get_seq())
+        handler = getattr(self, f"_on_{m.get_type().lower()}", None)
+        if handler is None:
+            return
+        try:
+            handler(m, sender, scomp, t)
+        except (ValueError, TypeError, OverflowError, KeyError) as e:
+            # a well-framed message with absurd content: refuse it, keep running, keep state
+            self.counters.bad_frames += 1
+            self.statustext(f"ignored {m.get_type()}: {e}", mav.MAV_SEVERITY_WARNING)
+
+    def _for_us(self, m) -> bool:
+        ts = getattr(m, "target_system", None)
+        if ts is not None and ts not in (0, self.sysid):
+            return False
+        tc = getattr(m, "target_component", None)
+        return tc is None or tc in (0, self.compid) or m.get_type() == "MANUAL_CONTROL"
+
+    # ----- commands ------------------------------------------------------------------------------------------
+    def _on_command_long(self, m, sender: int, scomp: int, t: float) -> None:
+        params = (m.param1, m.param2, m.param3, m.param4, m.param5, m.param6, m.param7)
+        self._command(m.command, params, sender, scomp, t)
+
+    def _on_command_int(self, m, sender: int, scomp: int, t: float) -> None:
+        params = (m.param1, m.param2, m.param3, m.param4, float(m.x), float(m.y), m.z)
+        self._command(m.command, params, sender, scomp, t)
+
+    def _command(self, command: int, p: tuple, sender: int, scomp: int, t: float) -> None:
+        """Exactly one COMMAND_ACK per command message; a retry repeats the first answer without re-executing."""
+        key = (command, *[round(x, 6) if math.isfinite(x) else str(x) for x in p])
+        slot = (sender, scomp, command)
+        prev = self.answered.get(slot)
+        if prev is not None and prev.key == key and t - prev.at <= RETRY_WINDOW:
+            self.counters.command_retries += 1
+            prev.at = t
+            self._ack(command, prev.result, prev.param2, sender, scomp)
+            return
+        self.counters.commands += 1
+        handler = COMMANDS.get(command)
+        if handler is None:
+            self.counters.unsupported += 1
+            result, param2 = mav.MAV_RESULT_UNSUPPORTED, 0
+        else:
+            result, param2 = handler(self, p, sender, scomp, t)
+        self.answered[slot] = _Answered(key, t, result, param2)
+        if len(self.answered) > 256:
+            for k in sorted(self.answered, key=lambda k: self.answered[k].at)[:128]:
+                del self.answered[k]
+        self._ack(command, result, param2, sender, scomp)
+
+    def _ack(self, command: int, result: int, param2: int, sender: int, scomp: int) -> None:
+        self.mav.command_ack_send(command, result, 0, int(param2), sender, scomp)
+
+    def _verdict(self, chk: Check, what: str, sender: int) -> tuple[int, int]:
+        if chk.verdict is Verdict.EXECUTE:
+            return mav.MAV_RESULT_ACCEPTED, 0
+        if chk.verdict is Verdict.QUEUE:
+            return mav.MAV_RESULT_IN_PROGRESS, 0
+        self.statustext(f"{what} from {sender} refused: {chk.detail or chk.reason.name}", mav.MAV_SEVERITY_WARNING)
+        return REJECT_RESULT.get(chk.reason, mav.MAV_RESULT_DENIED), 0
+
+    def _cmd_arm(self, p, sender, scomp, t):
+        chk = self.vehicle.command(sender, scomp, t, ("arm", p[0] >= 0.5))
+        return self._verdict(chk, "arm" if p[0] >= 0.5 else "disarm", sender)
+
+    def _cmd_rtl(self, p, sender, scomp, t):
+        return self._verdict(self.vehicle.rtl(sender, scomp, t), "return", sender)
+
+    def _cmd_return_to_link(self, p, sender, scomp, t):
+        """MAV_CMD_NAV_RETURN_TO_LINK as a command: run this one return block now, keep the stored plan."""
+        item = PlanItem(NAV_RETURN_TO_LINK, *[0.0 if math.isnan(x) else x for x in p[:4]])
+        if not (0 <= item.param1 <= 10000 and 0 <= item.param2 <= 5 and -1 <= item.param3 <= 2
+                and -1 <= item.param4 <= 1):
+            self.statustext("return to link: parameter out of range", mav.MAV_SEVERITY_WARNING)
+            return mav.MAV_RESULT_DENIED, 0
+        return self._verdict(self.vehicle.return_now((item,), sender, scomp, t), "return to link", sender)
+
+    def _cmd_set_mode(self, p, sender, scomp, t):
+        base, custom, sub = int(p[0]), int(p[1]), int(p[2])
+        mode = decode_mode(base, custom, sub)
+        return self._mode(mode, sender, scomp, t)
+
+    def _cmd_set_standard_mode(self, p, sender, scomp, t):
+        standard = {mav.MAV_STANDARD_MODE_SAFE_RECOVERY: "RTL", mav.MAV_STANDARD_MODE_POSITION_HOLD: "HOLD",
+                    mav.MAV_STANDARD_MODE_MISSION: "RTL"}.get(int(p[0]))
+        return self._mode(standard, sender, scomp, t)
+
+    def _mode(self, mode: str | None, sender: int, scomp: int, t: float) -> tuple[int, int]:
+        if mode is None:
+            self.statustext("mode not supported", mav.MAV_SEVERITY_WARNING)
+            return mav.MAV_RESULT_DENIED, 0
+        if mode == "RTL":
+            return self._cmd_rtl((), sender, scomp, t)
+        chk = self.vehicle.take_manual(sender, scomp, t)
+        if chk.executes and mode == "HOLD":
+            self.vehicle.command(sender, scomp, t, ("hold",))
+        return self._verdict(chk, f"mode {mode}", sender)
+
+    def _cmd_request_message(self, p, sender, scomp, t):
+        msgid = int(p[0])
+        if not self._emit(msgid, t, on_request=True):
+            return mav.MAV_RESULT_DENIED, 0
+        return mav.MAV_RESULT_ACCEPTED, 0
+
+    def _cmd_autopilot_capabilities(self, p, sender, scomp, t):
+        self._emit(mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION, t, on_request=True)
+        return mav.MAV_RESULT_ACCEPTED, 0
+
+    def _cmd_home(self, p, sender, scomp, t):
+        self._emit(mav.MAVLINK_MSG_ID_HOME_POSITION, t, on_request=True)
+        return mav.MAV_RESULT_ACCEPTED, 0
+
+    def _cmd_message_interval(self, p, sender, scomp, t):
+        msgid, interval_us = int(p[0]), p[1]
+        if msgid not in BUILDERS or msgid == mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+            return mav.MAV_RESULT_DENIED, 0
+        if interval_us == -1:
+            self.intervals[msgid] = math.inf
+        elif interval_us == 0:
+            self.intervals[msgid] = DEFAULT_RATES.get(msgid, math.inf)
+        elif interval_us > 0:
+            self.intervals[msgid] = max(0.02, interval_us / 1e6)
+        else:
+            return mav.MAV_RESULT_DENIED, 0
+        self.due[msgid] = t
+        return mav.MAV_RESULT_ACCEPTED, 0
+
+    def _cmd_operator_control(self, p, sender, scomp, t):
+        requester = int(p[3]) or sender
+        if requester != sender:
+            self.statustext("operator control: a station can only request control for itself",
+                            mav.MAV_SEVERITY_WARNING)
+            return mav.MAV_RESULT_DENIED, 0
+        if p[0] >= 0.5:
+            chk = self.vehicle.acquire(sender, scomp, t, allow_takeover=p[1] >= 0.5)
+            if chk.executes:
+                return mav.MAV_RESULT_ACCEPTED, self.vehicle.book.epoch or 0
+            return self._verdict(chk, "control request", sender)
+        return self._verdict(self.vehicle.release(sender, t), "release", sender)
+
+    def _cmd_lease_claim(self, p, sender, scomp, t):
+        epoch, index = _whole(p[0]), _whole(p[1])
+        if epoch is None or index is None or not 0 <= epoch <= 65535 or not -1 <= index <= 65534:
+            self.statustext("lease claim: epoch or index out of range", mav.MAV_SEVERITY_WARNING)
+            return mav.MAV_RESULT_DENIED, 0
+        chk = self.vehicle.claim(sender, epoch, index, t)
+        if chk.executes and chk.lease is not None:
+            return mav.MAV_RESULT_ACCEPTED, chk.lease.index
+        return self._verdict(chk, "lease claim", sender)
+
+    def _cmd_lease_expire(self, p, sender, scomp, t):
+        epoch, index = _whole(p[0]), _whole(p[1])
+        if epoch is None or index is None or not 0 <= epoch <= 65535 or not 0 <= index <= 65534:
+            self.statustext("lease expire: epoch or index out of range", mav.MAV_SEVERITY_WARNING)
+            return mav.MAV_RESULT_DENIED, 0
+        return self._verdict(self.vehicle.expire(sender, epoch, index, t), "lease expire", sender)
+
+    def _cmd_mission_current(self, p, sender, scomp, t):
+        seq = _whole(p[0])
+        error = self.vehicle.set_plan_start(seq if seq is not None else -2, sender, scomp, t)
+        if error:
+            self.statustext(f"set mission current: {error}", mav.MAV_SEVERITY_WARNING)
+            return mav.MAV_RESULT_DENIED, 0
+        self._emit(mav.MAVLINK_MSG_ID_MISSION_CURRENT, t, on_request=True)
+        return mav.MAV_RESULT_ACCEPTED, 0
+
+    # ----- teleop and modes as messages ---------------------------------------------------------------------
+    def _on_manual_control(self, m, sender, scomp, t):
+        if m.target not in (0, self.sysid):
+            self.counters.wrong_target += 1
+            return
+        x, r = _clamp(m.x, -1000, 1000), _clamp(m.r, -1000, 1000)
+        self._teleop(x / 1000 * MAX_TELEOP_SPEED, r / 1000 * MAX_TELEOP_YAW_RATE, sender, scomp, t)
+
+    def _on_set_position_target_local_ned(self, m, sender, scomp, t):
+        if m.type_mask & 0b111000 == 0b111000:
+            return  # no velocity in this target: only velocity teleop is supported on the ground
+        vx, vy = _finite(m.vx), _finite(m.vy)
+        yaw_rate = None if m.type_mask & 2048 else _finite(m.yaw_rate)
+        if m.coordinate_frame in (mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_OFFSET_NED, mav.MAV_FRAME_BODY_FRD):
+            speed, turn = vx, yaw_rate if yaw_rate is not None else 0.0
+        else:
+            speed, turn = velocity_to_command(vx, vy, yaw_rate, self.vehicle.estimator.pose.yaw)
+        self._teleop(speed, turn, sender, scomp, t)
+
+    def _teleop(self, speed: float, yaw_rate: float, sender: int, scomp: int, t: float) -> None:
+        speed = _clamp(speed, -MAX_TELEOP_SPEED, MAX_TELEOP_SPEED)
+        yaw_rate = _clamp(yaw_rate, -MAX_TELEOP_YAW_RATE, MAX_TELEOP_YAW_RATE)
+        chk = self.vehicle.command(sender, scomp, t, ("teleop", speed, yaw_rate))
+        if not chk.executes and chk.verdict is not Verdict.QUEUE:
+            key = (sender, "teleop")
+            if t - self.notice_at.get(key, -math.inf) >= REJECT_NOTICE_GAP:
+                self.notice_at[key] = t
+                self.statustext(f"teleop from {sender} refused: {chk.detail or chk.reason.name}",
+                                mav.MAV_SEVERITY_WARNING)
+
+    def _on_set_mode(self, m, sender, scomp, t):
+        if m.target_system not in (0, self.sysid):
+            return
+        custom = int(m.custom_mode)
+        if custom > 0xFFFF:
+            mode = decode_mode(m.base_mode, (custom >> 16) & 0xFF, (custom >> 24) & 0xFF)
+        else:
+            mode = decode_mode(m.base_mode, custom, 0)
+        self._mode(mode, sender, scomp, t)
+
+    # ----- missions -----------------------------------------------------------------------------------------
+    def _mission_allowed(self, sender: int, scomp: int, mission_type: int, t: float) -> tuple[int, str]:
+        """A return-plan upload is a state change: only the owner (or a plain client auto-granted) may."""
+        v = self.vehicle
+        v.admit(sender, scomp, t)
+        owner = v.book.owner
+        if owner is not None and owner != sender:
+            v.commands_rejected += 1
+            return DENIED, f"mission from {sender} refused: GCS {owner} is in control"
+        return ACCEPTED, ""
+
+    def _accept_mission(self, mission_type: int, items: tuple[Item, ...], sysid: int, compid: int,
+                        t: float) -> tuple[int, str]:
+        if mission_type != 0:
+            return ACCEPTED, ""
+        try:
+            plan = to_plan(items, self.origin)
+        except ValueError as e:
+            return INVALID, str(e)
+        error = self.vehicle.set_plan(plan, t)
+        if error:
+            return UNSUPPORTED, error
+        n = len(self.vehicle.book.plan) if items else 0
+        self.statustext(f"return plan: {len(items)} items, {n} leases" if items else "return plan: default")
+        return ACCEPTED, ""
+
+    def _on_mission_count(self, m, sender, scomp, t):
+        mt = getattr(m, "mission_type", 0)
+        why = self.missions.on_count(sender, scomp, m.count, mt, t, self._mission_allowed(sender, scomp, mt, t))
+        if why:
+            self.statustext(why, mav.MAV_SEVERITY_WARNING)
+
+    def _on_mission_item_int(self, m, sender, scomp, t):
+        item = Item(m.seq, m.frame, m.command, m.current, m.autocontinue, m.param1, m.param2, m.param3, m.param4,
+                    int(m.x), int(m.y), m.z, getattr(m, "mission_type", 0))
+        why = self.missions.on_item(sender, scomp, item, t)
+        if why:
+            self.statustext(why, mav.MAV_SEVERITY_WARNING)
+
+    def _on_mission_item(self, m, sender, scomp, t):
+        """The deprecated float item (MAVProxy still sends it): stored in the MISSION_ITEM_INT form."""
+        scale = 1e7 if m.frame in (0, 3, 5, 6, 10, 11) else (1e4 if m.frame in (1, 7) else 1.0)
+        x, y = _finite(m.x) * scale, _finite(m.y) * scale
+        if abs(x) > 2**31 - 1 or abs(y) > 2**31 - 1:
+            raise ValueError("position out of range")
+        item = Item(m.seq, m.frame, m.command, m.current, m.autocontinue, m.param1, m.param2, m.param3, m.param4,
+                    round(x), round(y), m.z, getattr(m, "mission_type", 0))
+        why = self.missions.on_item(sender, scomp, item, t)
+        if why:
+            self.statustext(why, mav.MAV_SEVERITY_WARNING)
+
+    def _on_mission_request_list(self, m, sender, scomp, t):
+        self.missions.on_request_list(sender, scomp, getattr(m, "mission_type", 0))
+
+    def _on_mission_request_int(self, m, sender, scomp, t):
+        self.missions.on_request(sender, scomp, m.seq, getattr(m, "mission_type", 0))
+
+    def _on_mission_request(self, m, sender, scomp, t):
+        self.missions.on_request(sender, scomp, m.seq, getattr(m, "mission_type", 0), as_int=False)
+
+    def _on_mission_clear_all(self, m, sender, scomp, t):
+        mt = getattr(m, "mission_type", 0)
+        why = self.missions.on_clear(sender, scomp, mt, t, self._mission_allowed(sender, scomp, mt, t))
+        if why:
+            self.statustext(why, mav.MAV_SEVERITY_WARNING)
+
+    def _on_mission_ack(self, m, sender, scomp, t):
+        self.missions.on_ack(sender, getattr(m, "mission_type", 0))
+
+    def _on_mission_set_current(self, m, sender, scomp, t):
+        error = self.vehicle.set_plan_start(m.seq, sender, scomp, t)
+        if error:
+            self.statustext(f"set mission current: {error}", mav.MAV_SEVERITY_WARNING)
+        self._emit(mav.MAVLINK_MSG_ID_MISSION_CURRENT, t, on_request=True)
+
+    # ----- parameters ---------------------------------------------------------------------------------------
+    def _param_value(self, index: int) -> None:
+        spec = SPECS[index]
+        self.mav.param_value_send(spec.name.encode(), self.vehicle.params[spec.name], mav.MAV_PARAM_TYPE_REAL32,
+                                  len(SPECS), index)
+
+    def _on_param_request_list(self, m, sender, scomp, t):
+        for i in range(len(SPECS)):
+            self._param_value(i)
+
+    def _on_param_request_read(self, m, sender, scomp, t):
+        if m.param_index >= 0:
+            if m.param_index < len(SPECS):
+                self._param_value(m.param_index)
+            return
+        name = _param_name(m.param_id)
+        names = self.vehicle.params.names()
+        if name in names:
+            self._param_value(names.index(name))
+        else:
+            self.statustext(f"no parameter {name!r}", mav.MAV_SEVERITY_WARNING)
+
+    def _on_param_set(self, m, sender, scomp, t):
+        name = _param_name(m.param_id)
+        names = self.vehicle.params.names()
+        if name not in names:
+            self.statustext(f"param set refused: no parameter {name!r}", mav.MAV_SEVERITY_WARNING)
+            return
+        owner = self.vehicle.book.owner
+        if owner is not None and owner != sender:
+            self.vehicle.commands_rejected += 1
+            self.statustext(f"param set from {sender} refused: GCS {owner} is in control", mav.MAV_SEVERITY_WARNING)
+        else:
+            try:
+                self.vehicle.set_param(name, float(m.param_value))
+                if self.param_file is not None:
+                    self.param_file.write_text(format_parm(self.vehicle.params.values), encoding="utf-8")
+            except ParamError as e:
+                self.statustext(f"param set refused: {e}", mav.MAV_SEVERITY_WARNING)
+        self._param_value(names.index(name))
+
+    # ----- telemetry ----------------------------------------------------------------------------------------
+    def tick(self, t: float) -> list[bytes]:
+        """Announce lease events, send due telemetry, and return every frame produced since the last tick."""
+        self.t = t
+        v = self.vehicle
+        for ev in v.events:
+            self.mav.lease_event_send(self._boot_ms(ev.t), ev.epoch, _idx(ev.expired), _idx(ev.current),
+                                      int(ev.reason), int(ev.holder))
+        v.events.clear()
+        for text in v.notices:
+            self.statustext(text, mav.MAV_SEVERITY_NOTICE)
+        v.notices.clear()
+        for seq in v.reached:
+            if seq >= 0:
+                self.mav.mission_item_reached_send(seq)
+        v.reached.clear()
+        why = self.missions.tick(t)
+        if why:
+            self.statustext(why, mav.MAV_SEVERITY_WARNING)
+        if t >= self.next_heartbeat:
+            self.next_heartbeat = t + 1.0
+            self._heartbeat()
+        status_key = self._status_key()
+        if status_key != self.last_status_key:
+            self.last_status_key = status_key
+            self.due[mav.MAVLINK_MSG_ID_LEASE_STATUS] = t
+            self.due[mav.MAVLINK_MSG_ID_MISSION_CURRENT] = t
+        control_key = (v.book.owner, v.book.takeover_allowed)
+        if control_key != self.last_control_key:
+            self.last_control_key = control_key
+            self.due[mav.MAVLINK_MSG_ID_CONTROL_STATUS] = t
+        for msgid, interval in self.intervals.items():
+            if t + 1e-9 >= self.due.get(msgid, self.boot_t):
+                self.due[msgid] = t + interval
+                self._emit(msgid, t)
+        frames = self._sink.frames
+        self._sink.frames = []
+        return frames
+
+    def _status_key(self) -> tuple:
+        b = self.vehicle.book
+        cur = b.current
+        return (b.epoch, b.owner, cur.index if cur else None, cur.newest_sub if cur else None,
+                cur.claimed if cur else None, self.vehicle.state())
+
+    def _emit(self, msgid: int, t: float, on_request: bool = False) -> bool:
+        build = BUILDERS.get(msgid)
+        if build is None:
+            return False
+        build(self, t)
+        return True
+
+    def custom_mode(self) -> int:
+        state = self.vehicle.state()
+        if state == State.TELEOP:
+            return PX4_POSCTL << 16
+        if state in (State.RETURNING,):
+            return (PX4_AUTO << 16) | (PX4_AUTO_RTL << 24)
+        if state == State.NAVIGATING:
+            return (PX4_AUTO << 16) | (PX4_AUTO_MISSION << 24)
+        return (PX4_AUTO << 16) | (PX4_AUTO_LOITER << 24)
+
+    def _heartbeat(self) -> None:
+        v = self.vehicle
+        base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        if v.armed:
+            base |= mav.MAV_MODE_FLAG_SAFETY_ARMED
+        state = v.state()
+        if state == State.TELEOP:
+            base |= mav.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+        elif state in (State.RETURNING, State.NAVIGATING):
+            base |= mav.MAV_MODE_FLAG_AUTO_ENABLED
+        system_status = mav.MAV_STATE_ACTIVE if v.armed else mav.MAV_STATE_STANDBY
+        self.mav.heartbeat_send(v.driver.mav_type, mav.MAV_AUTOPILOT_GENERIC, base, self.custom_mode(),
+                                system_status)
+
+    def _sys_status(self, t: float) -> None:
+        v = self.vehicle
+        gps_ok = v.readings is not None and v.estimator.fixes_used > 0 and self._fix_age(t) < 3.0
+        present = HEALTH_SENSORS | mav.MAV_SYS_STATUS_SENSOR_GPS
+        health = HEALTH_SENSORS | (mav.MAV_SYS_STATUS_SENSOR_GPS if gps_ok else 0)
+        c = self.counters
+        drop = int(min(10000, 10000 * c.bad_frames / max(1, c.frames + c.bad_frames)))
+        self.mav.sys_status_send(present, present, health, 200, 24000, 1000, 90, drop, c.bad_frames, 0, 0, 0, 0)
+
+    def _fix_age(self, t: float) -> float:
+        last = self.vehicle.last_fix_t
+        return math.inf if last is None else t - last
+
+    def _position(self, t: float) -> None:
+        p = self.vehicle.estimator.pose
+        lat, lon = self.origin.to_global(p.x, p.y)
+        vx, vy = self._velocity()
+        hdg = int(math.degrees(p.yaw) % 360 * 100)
+        self.mav.global_position_int_send(self._boot_ms(t), int(lat * 1e7), int(lon * 1e7),
+                                          int(self.origin.alt * 1000), 0, int(vx * 100), int(vy * 100), 0, hdg)
+
+    def _velocity(self) -> tuple[float, float]:
+        v = self.vehicle
+        speed = v.readings.speed if v.readings else 0.0
+        yaw = v.estimator.pose.yaw
+        return speed * math.cos(yaw), speed * math.sin(yaw)
+
+    def _local_position(self, t: float) -> None:
+        p = self.vehicle.estimator.pose
+        vx, vy = self._velocity()
+        self.mav.local_position_ned_send(self._boot_ms(t), p.x, p.y, 0.0, vx, vy, 0.0)
+
+    def _attitude(self, t: float) -> None:
+        v = self.vehicle
+        rate = v.readings.yaw_rate if v.readings else 0.0
+        self.mav.attitude_send(self._boot_ms(t), 0.0, 0.0, v.estimator.pose.yaw, 0.0, 0.0, rate)
+
+    def _gps_raw(self, t: float) -> None:
+        v = self.vehicle
+        fix = v.readings.fix if v.readings else None
+        last = v.last_fix
+        fresh = last is not None and self._fix_age(t) < 3.0
+        lat, lon = self.origin.to_global(*(last if fresh else (0.0, 0.0)))
+        eph = int(min(65535, (fix.std if fix else 0.7) * 100)) if fresh else 65535
+        self.mav.gps_raw_int_send(int(t * 1e6), 3 if fresh else 1, int(lat * 1e7) if fresh else 0,
+                                  int(lon * 1e7) if fresh else 0, int(self.origin.alt * 1000) if fresh else 0,
+                                  eph, 65535, 65535, 65535, 10 if fresh else 0)
+
+    def _extended_sys_state(self, t: float) -> None:
+        self.mav.extended_sys_state_send(mav.MAV_VTOL_STATE_UNDEFINED, mav.MAV_LANDED_STATE_ON_GROUND)
+
+    def _home(self, t: float) -> None:
+        hx, hy = self.vehicle.home
+        lat, lon = self.origin.to_global(hx, hy)
+        self.mav.home_position_send(int(lat * 1e7), int(lon * 1e7), int(self.origin.alt * 1000), hx, hy, 0.0,
+                                    [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(t * 1e6))
+
+    def _autopilot_version(self, t: float) -> None:
+        self.mav.autopilot_version_send(CAPABILITIES, 0x00010000 | 0xFF, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0,
+                                        self.sysid)
+
+    def _mission_current(self, t: float) -> None:
+        v = self.vehicle
+        total = len(self.missions.lists[0])
+        st = v.service
+        seq = st.items[st.item].seq if st is not None and 0 <= st.item < len(st.items) else 0
+        state = mav.MISSION_STATE_ACTIVE if v.state() in (State.RETURNING, State.HOLDING, State.NAVIGATING) \
+            else (mav.MISSION_STATE_NOT_STARTED if total else mav.MISSION_STATE_NO_MISSION)
+        self.mav.mission_current_send(max(0, seq), total, state)
+
+    def _control_status(self, t: float) -> None:
+        b = self.vehicle.book
+        flags = mav.GCS_CONTROL_STATUS_FLAGS_SYSTEM_MANAGER
+        if b.takeover_allowed:
+            flags |= mav.GCS_CONTROL_STATUS_FLAGS_TAKEOVER_ALLOWED
+        self.mav.control_status_send(flags, b.owner or 0, [0] * 10)
+
+    def _lease_status(self, t: float) -> None:
+        v = self.vehicle
+        b = v.book
+        cur = b.current
+        age = b.link.age(t)
+        st = v.service
+        nan = math.nan
+        start = st.start if st is not None else (nan, nan)
+        target = st.route.target if st is not None and st.route is not None and st.route.target else (nan, nan)
+        remaining = v.route_remaining()
+        self.mav.lease_status_send(
+            self._boot_ms(t), b.epoch or 0, b.owner or 0, b.owner_compid if b.owner else 0,
+            _idx(cur.index if cur else None), cur.newest_sub[0] if cur and cur.newest_sub else NO_INDEX,
+            int(cur.holder) if cur else int(Holder.NONE), int(cur.claimed) if cur else 0, len(b.scheduled),
+            v.state(), int(b.last_reason),
+            0xFFFFFFFF if age is None else int(min(age, 4e6) * 1000), start[0], start[1], target[0], target[1],
+            v.displacement(), st.max_displacement if st is not None and math.isfinite(st.max_displacement) else nan,
+            remaining, min(65535, v.trail.count))
+
+
+BUILDERS: dict[int, Callable[[Endpoint, float], None]] = {
+    mav.MAVLINK_MSG_ID_SYS_STATUS: Endpoint._sys_status,
+    mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: Endpoint._extended_sys_state,
+    mav.MAVLINK_MSG_ID_GPS_RAW_INT: Endpoint._gps_raw,
+    mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: Endpoint._position,
+    mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: Endpoint._local_position,
+    mav.MAVLINK_MSG_ID_ATTITUDE: Endpoint._attitude,
+    mav.MAVLINK_MSG_ID_HOME_POSITION: Endpoint._home,
+    mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION: Endpoint._autopilot_version,
+    mav.MAVLINK_MSG_ID_MISSION_CURRENT: Endpoint._mission_current,
+    mav.MAVLINK_MSG_ID_CONTROL_STATUS: Endpoint._control_status,
+    mav.MAVLINK_MSG_ID_LEASE_STATUS: Endpoint._lease_status,
+    mav.MAVLINK_MSG_ID_HEARTBEAT: lambda ep, t: ep._heartbeat(),
+}
+
+COMMANDS: dict[int, Callable[..., tuple[int, int]]] = {
+    mav.MAV_CMD_COMPONENT_ARM_DISARM: Endpoint._cmd_arm,
+    mav.MAV_CMD_NAV_RETURN_TO_LAUNCH: Endpoint._cmd_rtl,
+    mav.MAV_CMD_NAV_RETURN_TO_LINK: Endpoint._cmd_return_to_link,
+    mav.MAV_CMD_DO_SET_MODE: Endpoint._cmd_set_mode,
+    mav.MAV_CMD_DO_SET_STANDARD_MODE: Endpoint._cmd_set_standard_mode,
+    mav.MAV_CMD_REQUEST_MESSAGE: Endpoint._cmd_request_message,
+    mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: Endpoint._cmd_autopilot_capabilities,
+    mav.MAV_CMD_GET_HOME_POSITION: Endpoint._cmd_home,
+    mav.MAV_CMD_SET_MESSAGE_INTERVAL: Endpoint._cmd_message_interval,
+    mav.MAV_CMD_REQUEST_OPERATOR_CONTROL: Endpoint._cmd_operator_control,
+    mav.MAV_CMD_LEASE_CLAIM: Endpoint._cmd_lease_claim,
+    mav.MAV_CMD_LEASE_EXPIRE: Endpoint._cmd_lease_expire,
+    mav.MAV_CMD_DO_SET_MISSION_CURRENT: Endpoint._cmd_mission_current,
+}
+
+
+def decode_mode(base: int, custom: int, sub: int) -> str | None:
+    """DO_SET_MODE in the PX4 encoding (main/sub) or the ArduPilot Rover numbering -> HOLD / RTL / MANUAL."""
+    if not base & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+        return None
+    if custom == PX4_AUTO:
+        if sub in (PX4_AUTO_RTL, PX4_AUTO_MISSION):
+            return "RTL"
+        if sub in (PX4_AUTO_LOITER, 0):
+            return "HOLD"  # PX4 AUTO/LOITER, or ArduPilot Rover HOLD (4 with sub 0)
+        return None
+    if custom in (PX4_MANUAL, PX4_POSCTL, AP_MANUAL, AP_STEERING):
+        return "MANUAL"
+    if custom in (AP_RTL, AP_SMART_RTL, AP_AUTO):
+        return "RTL"
+    return None
+
+
+def _idx(i: int | None) -> int:
+    return NO_INDEX if i is None else i
+
+
+def _whole(x: float) -> int | None:
+    return int(x) if math.isfinite(x) and x == int(x) else None
+
+
+def _finite(x: float) -> float:
+    if not math.isfinite(x):
+        raise ValueError("not a finite number")
+    return float(x)
+
+
+def _clamp(x: float, lo: float, hi: float) -> float:
+    return max(lo, min(hi, _finite(x)))
+
+
+def _param_name(raw) -> str:
+    if isinstance(raw, bytes):
+        raw = raw.decode("ascii", "replace")
+    return raw.split("\x00", 1)[0]
+
+
+__all__ = ["Endpoint", "decode_mode", "ExpireReason"]

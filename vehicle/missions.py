@@ -1,0 +1,235 @@
+"""The vehicle side of the MAVLink mission protocol, for mission types 0 (the return plan), 1 (fence) and 2 (rally).
+
+Uploads are transactions: the vehicle requests every item with MISSION_REQUEST_INT, re-requests on a timeout, and
+only when the last item has arrived and the whole list is accepted does it replace the stored list. A cancelled,
+timed-out or refused upload leaves the previous plan exactly as it was. Errors are MISSION_ACK codes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from vehicle.service import NAV_WAYPOINT, PlanItem
+
+ITEM_TIMEOUT = 0.5  # s before an item is requested again
+ITEM_RETRIES = 5
+MAX_ITEMS = 500
+EARTH_R = 6378137.0
+
+# MAV_MISSION_RESULT
+ACCEPTED, ERROR, UNSUPPORTED_FRAME, UNSUPPORTED, NO_SPACE, INVALID = 0, 1, 2, 3, 4, 5
+INVALID_SEQUENCE, DENIED, OPERATION_CANCELLED = 13, 14, 15
+GLOBAL_FRAMES = (0, 3, 5, 6, 10, 11)  # MAV_FRAME_GLOBAL*, x/y are lat/lon (degE7 in MISSION_ITEM_INT)
+LOCAL_FRAMES = (1, 7)  # MAV_FRAME_LOCAL_NED / LOCAL_ENU is not accepted; x/y are metres * 1e4
+MISSION_FRAME = 2
+
+
+@dataclass(frozen=True)
+class Item:
+    """A mission item exactly as received (MISSION_ITEM_INT fields), so a download returns what was uploaded."""
+
+    seq: int
+    frame: int
+    command: int
+    current: int
+    autocontinue: int
+    param1: float
+    param2: float
+    param3: float
+    param4: float
+    x: int
+    y: int
+    z: float
+    mission_type: int
+
+
+@dataclass(frozen=True)
+class Origin:
+    """The local frame's origin on the globe, for global <-> local conversion of positions."""
+
+    lat: float = 47.397742
+    lon: float = 8.545594
+    alt: float = 488.0
+
+    def to_global(self, x: float, y: float) -> tuple[float, float]:
+        lat = self.lat + math.degrees(x / EARTH_R)
+        lon = self.lon + math.degrees(y / (EARTH_R * math.cos(math.radians(self.lat))))
+        return lat, lon
+
+    def to_local(self, lat: float, lon: float) -> tuple[float, float]:
+        x = math.radians(lat - self.lat) * EARTH_R
+        y = math.radians(lon - self.lon) * EARTH_R * math.cos(math.radians(self.lat))
+        return x, y
+
+
+def to_plan(items: tuple[Item, ...], origin: Origin) -> tuple[PlanItem, ...]:
+    """Mission items -> return-plan items in the local frame. Raises ValueError naming an unusable item."""
+    out = []
+    for it in items:
+        x, y = float(it.x), float(it.y)
+        if it.command == NAV_WAYPOINT:
+            if it.frame in GLOBAL_FRAMES:
+                x, y = origin.to_local(it.x / 1e7, it.y / 1e7)
+            elif it.frame in LOCAL_FRAMES:
+                x, y = it.x / 1e4, it.y / 1e4
+            else:
+                raise ValueError(f"item {it.seq}: frame {it.frame} is not supported for a waypoint")
+        for p in (it.param1, it.param2, it.param3, it.param4):
+            if not math.isfinite(p) and not math.isnan(p):
+                raise ValueError(f"item {it.seq}: parameter out of range")
+        out.append(PlanItem(it.command, _num(it.param1, 0.0), _num(it.param2, 0.0), _num(it.param3, -1.0),
+                            _num(it.param4, -1.0), x, y, it.seq))
+    return tuple(out)
+
+
+def _num(v: float, default: float) -> float:
+    return default if math.isnan(v) else float(v)
+
+
+@dataclass
+class _Upload:
+    sysid: int
+    compid: int
+    mission_type: int
+    count: int
+    items: list[Item]
+    asked_at: float
+    retries: int = 0
+
+
+class MissionServer:
+    """One vehicle's stored lists and the transfer in progress.
+
+    ``send(name, **fields)`` emits a message; ``accept(mission_type, items, sysid, compid, t)`` returns a
+    MAV_MISSION_RESULT and a reason, and is where the return plan is validated and scheduled.
+    """
+
+    def __init__(self, send: Callable[..., None],
+                 accept: Callable[[int, tuple[Item, ...], int, int, float], tuple[int, str]]) -> None:
+        self.send = send
+        self.accept = accept
+        self.lists: dict[int, tuple[Item, ...]] = {0: (), 1: (), 2: ()}
+        self.upload: _Upload | None = None
+        self.uploads_cancelled = 0
+
+    def _ack(self, sysid: int, compid: int, result: int, mission_type: int) -> None:
+        self.send("mission_ack", target_system=sysid, target_component=compid, type=result,
+                  mission_type=mission_type)
+
+    def _request(self, up: _Upload, t: float) -> None:
+        up.asked_at = t
+        self.send("mission_request_int", target_system=up.sysid, target_component=up.compid,
+                  seq=len(up.items), mission_type=up.mission_type)
+
+    # ----- upload ------------------------------------------------------------------------------------------
+    def on_count(self, sysid: int, compid: int, count: int, mission_type: int, t: float,
+                 allowed: tuple[int, str]) -> str | None:
+        """MISSION_COUNT starts an upload (and aborts any other). ``allowed`` is the lease verdict."""
+        if mission_type not in self.lists:
+            self._ack(sysid, compid, UNSUPPORTED, mission_type)
+            return f"mission type {mission_type} not supported"
+        if allowed[0] != ACCEPTED:
+            self._ack(sysid, compid, allowed[0], mission_type)
+            return allowed[1]
+        if count > MAX_ITEMS:
+            self._ack(sysid, compid, NO_SPACE, mission_type)
+            return f"{count} items: at most {MAX_ITEMS}"
+        self.upload = None
+        if count == 0:
+            return self._finish(_Upload(sysid, compid, mission_type, 0, [], t), t)
+        self.upload = _Upload(sysid, compid, mission_type, count, [], t)
+        self._request(self.upload, t)
+        return None
+
+    def on_item(self, sysid: int, compid: int, item: Item, t: float) -> str | None:
+        up = self.upload
+        if up is None or sysid != up.sysid or item.mission_type != up.mission_type:
+            return None  # not ours: a stray or duplicate item after the transfer ended
+        expected = len(up.items)
+        if item.seq < expected:
+            return None  # a duplicate of an item we already have (our re-request crossed it)
+        if item.seq > expected:
+            self._request(up, t)  # out of order: ask again for the one we need
+            return None
+        up.items.append(item)
+        up.retries = 0
+        if len(up.items) == up.count:
+            self.upload = None
+            return self._finish(up, t)
+        self._request(up, t)
+        return None
+
+    def _finish(self, up: _Upload, t: float) -> str | None:
+        items = tuple(up.items)
+        result, why = self.accept(up.mission_type, items, up.sysid, up.compid, t)
+        if result == ACCEPTED:
+            self.lists[up.mission_type] = items
+        self._ack(up.sysid, up.compid, result, up.mission_type)
+        return None if result == ACCEPTED else why
+
+    def on_ack(self, sysid: int, mission_type: int) -> None:
+        """A ground station cancels its upload by sending MISSION_ACK with an error."""
+        if self.upload is not None and self.upload.sysid == sysid and self.upload.mission_type == mission_type:
+            self.upload = None
+            self.uploads_cancelled += 1
+
+    def tick(self, t: float) -> str | None:
+        up = self.upload
+        if up is None or t - up.asked_at < ITEM_TIMEOUT:
+            return None
+        if up.retries >= ITEM_RETRIES:
+            self.upload = None
+            self.uploads_cancelled += 1
+            self._ack(up.sysid, up.compid, OPERATION_CANCELLED, up.mission_type)
+            return f"mission upload timed out at item {len(up.items)}; previous plan kept"
+        up.retries += 1
+        self._request(up, t)
+        return None
+
+    # ----- download ----------------------------------------------------------------------------------------
+    def on_request_list(self, sysid: int, compid: int, mission_type: int) -> None:
+        if mission_type not in self.lists:
+            self._ack(sysid, compid, UNSUPPORTED, mission_type)
+            return
+        self.send("mission_count", target_system=sysid, target_component=compid,
+                  count=len(self.lists[mission_type]), mission_type=mission_type)
+
+    def on_request(self, sysid: int, compid: int, seq: int, mission_type: int, as_int: bool = True) -> None:
+        items = self.lists.get(mission_type)
+        if items is None:
+            self._ack(sysid, compid, UNSUPPORTED, mission_type)
+            return
+        if not 0 <= seq < len(items):
+            self._ack(sysid, compid, INVALID_SEQUENCE, mission_type)
+            return
+        it = items[seq]
+        fields = dict(target_system=sysid, target_component=compid, seq=seq, frame=it.frame, command=it.command,
+                      current=it.current, autocontinue=it.autocontinue, param1=it.param1, param2=it.param2,
+                      param3=it.param3, param4=it.param4, z=it.z, mission_type=mission_type)
+        if as_int:
+            self.send("mission_item_int", x=it.x, y=it.y, **fields)
+        else:
+            scale = 1e7 if it.frame in GLOBAL_FRAMES else (1e4 if it.frame in LOCAL_FRAMES else 1.0)
+            self.send("mission_item", x=it.x / scale, y=it.y / scale, **fields)
+
+    def on_clear(self, sysid: int, compid: int, mission_type: int, t: float, allowed: tuple[int, str]) -> str | None:
+        if mission_type == 255:  # MAV_MISSION_TYPE_ALL
+            types = list(self.lists)
+        elif mission_type in self.lists:
+            types = [mission_type]
+        else:
+            self._ack(sysid, compid, UNSUPPORTED, mission_type)
+            return f"mission type {mission_type} not supported"
+        if allowed[0] != ACCEPTED:
+            self._ack(sysid, compid, allowed[0], mission_type)
+            return allowed[1]
+        for mt in types:
+            result, why = self.accept(mt, (), sysid, compid, t)
+            if result != ACCEPTED:
+                self._ack(sysid, compid, result, mission_type)
+                return why
+            self.lists[mt] = ()
+        self._ack(sysid, compid, ACCEPTED, mission_type)
+        return None
