@@ -57,6 +57,45 @@ def _cmd_sim_run(args: argparse.Namespace) -> int:
     return 0 if m["passed"] else 1
 
 
+def _address(text: str) -> tuple[str, int]:
+    host, _, port = text.rpartition(":")
+    try:
+        return host or "127.0.0.1", int(port)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not HOST:PORT") from None
+
+
+def _cmd_sim_serve(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from sim.serve import Server
+
+    sc = _scenario(args.scenario)
+    if args.speedup <= 0:
+        print("returnlink: error: --speedup must be positive", file=sys.stderr)
+        return 2
+    peers = tuple(args.peer) if args.peer else (("127.0.0.1", 14550), ("127.0.0.1", 14540))
+    try:
+        server = Server(sc, args.vehicle, args.seed, args.port, peers, args.perfect_link,
+                        Path(args.params) if args.params else None)
+    except OSError as e:
+        print(f"returnlink: error: cannot bind 127.0.0.1:{args.port}: {e}", file=sys.stderr)
+        return 2
+    host, port = server.address
+    print(f"returnlink: {sc.name} ({server.kind}) on udp {host}:{port}, sending to "
+          + ", ".join(f"{h}:{p}" for h, p in peers) + ("" if args.perfect_link else ", through the radio model"),
+          file=sys.stderr, flush=True)
+    try:
+        server.serve(args.speedup, args.duration)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.close()
+        out = Path(args.out) if args.out else Path("out") / f"serve-{sc.name}-{server.kind}"
+        print(f"returnlink: wrote {server.plot(out / 'trajectory.png')}", file=sys.stderr)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="returnlink", description="Lease-based automated return to link for MAVLink robots.")
@@ -74,6 +113,22 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", help="output directory (default: out/SCENARIO-VEHICLE-SEED)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.set_defaults(func=_cmd_sim_run)
+    serve = sim.add_parser("serve", help="run a scenario in real time over UDP for MAVSDK, MAVProxy, QGC")
+    serve.add_argument("scenario", help="a built-in scenario name or a .toml file")
+    serve.add_argument("--vehicle", choices=["rover", "legged"], help="robot model (default: the scenario's)")
+    serve.add_argument("--seed", type=int)
+    serve.add_argument("--speedup", type=float, default=1.0, help="run K times faster than real time")
+    serve.add_argument("--port", type=int, default=14580, help="UDP port the vehicle listens on")
+    serve.add_argument("--peer", type=_address, action="append",
+                       help="HOST:PORT to send to before anyone talks (default 127.0.0.1:14550 and :14540)")
+    serve.add_argument("--perfect-link", action="store_true", help="no radio model: every packet arrives")
+    serve.add_argument("--duration", type=float, default=float("inf"), help="stop after this many simulated s")
+    serve.add_argument("--params", help=".parm file to boot from and save parameter changes to")
+    serve.add_argument("--out", help="where to write the plot on exit")
+    serve.set_defaults(func=_cmd_sim_serve)
+    from gcs import cli as gcs_cli
+
+    gcs_cli.add_parser(sub)
     return p
 
 

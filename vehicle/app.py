@@ -120,6 +120,7 @@ class Vehicle:
         self.plan_items: tuple[PlanItem, ...] = ()  # the uploaded return plan (empty: the default plan)
         self.t = t
         self.armed = False
+        self.holding = False  # the operator asked for HOLD (shown as AUTO_LOITER until it drives again)
         self.setpoint: Setpoint | None = None
         self.service: ServiceState | None = None
         self.service_index: int | None = None
@@ -230,8 +231,11 @@ class Vehicle:
         if kind == "teleop" and lease is not None:
             _, speed, yaw_rate = payload
             self.setpoint = Setpoint(speed, yaw_rate, lease, self.t + SETPOINT_TTL)
+            if speed or yaw_rate:
+                self.holding = False
         elif kind == "hold":
             self.setpoint = None
+            self.holding = True
         elif kind == "arm":
             self.armed = bool(payload[1])
             if not self.armed:

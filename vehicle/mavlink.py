@@ -539,7 +539,7 @@ class Endpoint:
 
     def custom_mode(self) -> int:
         state = self.vehicle.state()
-        if state == State.TELEOP:
+        if state == State.TELEOP and not self.vehicle.holding:
             return PX4_POSCTL << 16
         if state in (State.RETURNING,):
             return (PX4_AUTO << 16) | (PX4_AUTO_RTL << 24)

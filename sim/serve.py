@@ -1,0 +1,101 @@
+"""``returnlink sim serve``: the simulated vehicle in real time (or K times faster) over UDP, like other SITLs.
+
+It binds a UDP port, sends to 127.0.0.1:14550 (QGroundControl, MAVProxy) and :14540 (MAVSDK) and answers whoever
+talks to it, through the radio proxy so the link dies where the scenario says it does. On exit it writes a
+trajectory plot of what happened.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from link.proxy import RadioProxy
+from link.radio import Radio
+from link.transports import UdpTransport
+from sim.driver import SimDriver
+from sim.plots import draw_trail, draw_world, plt, save
+from sim.scenario import Scenario
+from vehicle.app import DT, Vehicle
+from vehicle.mavlink import Endpoint
+from vehicle.params import load_defaults
+
+
+class Server:
+    def __init__(self, scenario: Scenario, vehicle: str | None = None, seed: int | None = None,
+                 port: int = 14580, peers: tuple[tuple[str, int], ...] = (("127.0.0.1", 14550), ("127.0.0.1", 14540)),
+                 perfect_link: bool = False, param_file: Path | None = None) -> None:
+        sc = self.scenario = scenario
+        self.kind = vehicle or sc.vehicle
+        self.seed = sc.seed if seed is None else seed
+        rng = np.random.default_rng(self.seed)
+        self.driver = SimDriver(sc, self.kind, rng)
+        params = load_defaults(param_file) if param_file and param_file.is_file() else load_defaults()
+        for k, v in sc.params.items():
+            params.set(k, v)
+        self.vehicle = Vehicle(self.driver, params, sc.start, 0.0, seed=self.seed)
+        self.endpoint = Endpoint(self.vehicle, param_file=param_file)
+        self.transport = UdpTransport(("127.0.0.1", port), peers)
+        station = sc.station(sc.operator_station)
+        radio = None if perfect_link else Radio(sc.radio, self.driver.world.attenuation_db, self.seed + 1)
+        self.proxy = RadioProxy(self.transport, radio, (station.x, station.y), station.power_dbm,
+                                lambda: self.driver.pose[:2])
+        self.true: list[tuple[float, float]] = []
+        self.est: list[tuple[float, float]] = []
+
+    @property
+    def address(self) -> tuple[str, int]:
+        return self.transport.address
+
+    def step(self) -> None:
+        v = self.vehicle
+        t = round(v.t + DT, 9)
+        for data in self.proxy.from_ground(t):
+            self.endpoint.receive(data, t)
+        v.tick(t)
+        self.driver.advance(DT)
+        self.proxy.update(t)
+        for frame in self.endpoint.tick(t):
+            self.proxy.to_ground(frame, t)
+        self.proxy.flush(t)
+        if int(round(t / DT)) % 10 == 0:
+            x, y, _ = self.driver.pose
+            p = v.estimator.pose
+            self.true.append((x, y))
+            self.est.append((p.x, p.y))
+
+    def serve(self, speedup: float = 1.0, duration: float = float("inf"), stop=lambda: False,
+              report_every: float = 5.0, out=sys.stderr) -> None:
+        w0 = time.monotonic()
+        next_report = 0.0
+        while self.vehicle.t < duration and not stop():
+            self.step()
+            t = self.vehicle.t
+            if out is not None and t >= next_report:
+                next_report = t + report_every
+                p = self.vehicle.estimator.pose
+                st = self.proxy.state
+                link = "perfect" if st is None else f"{st.rssi_dbm:6.1f} dBm, delivery {st.delivery:4.2f}"
+                print(f"t={t:7.1f} s  state {self.endpoint.custom_mode():#010x}  owner {self.vehicle.book.owner}"
+                      f"  pos ({p.x:6.1f}, {p.y:6.1f})  link {link}", file=out, flush=True)
+            wait = w0 + t / speedup - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
+
+    def close(self) -> None:
+        self.transport.close()
+
+    def plot(self, path: Path) -> Path:
+        fig, ax = plt.subplots(figsize=(9, 7))
+        draw_world(ax, self.driver.world, self.scenario.bounds)
+        if self.true:
+            true, est = np.array(self.true), np.array(self.est)
+            ax.plot(true[:, 1], true[:, 0], color="k", lw=0.9, alpha=0.55, label="true path")
+            ax.plot(est[:, 1], est[:, 0], color="tab:orange", lw=0.9, label="estimated path")
+        draw_trail(ax, self.vehicle.trail.points(), self.vehicle.trail.link_good())
+        ax.legend(loc="best", fontsize=7)
+        ax.set_title(f"sim serve {self.scenario.name} ({self.kind}), {self.vehicle.t:.0f} s")
+        return save(fig, path)

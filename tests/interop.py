@@ -1,0 +1,56 @@
+"""Shared helpers for the interop tests: a real-time simulated vehicle on loopback UDP, in a thread."""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from collections.abc import Callable
+
+from sim.scenario import load
+from sim.serve import Server
+
+
+def free_udp_port() -> int:
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+class ServedVehicle:
+    """``returnlink sim serve`` in-process: the same Server class, a perfect link, loopback only."""
+
+    def __init__(self, scenario: str = "tunnel", gcs_port: int | None = None, speedup: float = 1.0) -> None:
+        self.gcs_port = gcs_port or free_udp_port()
+        self.server = Server(load(scenario), port=0, peers=(("127.0.0.1", self.gcs_port),), perfect_link=True)
+        self.port = self.server.address[1]
+        self._stop = threading.Event()
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._run, args=(speedup,), daemon=True)
+        self.thread.start()
+
+    def _run(self, speedup: float) -> None:
+        try:
+            self.server.serve(speedup, stop=self._stop.is_set, out=None)
+        except BaseException as e:  # noqa: BLE001 - surfaced by close() so a crash fails the test
+            self.error = e
+
+    @property
+    def vehicle(self):
+        return self.server.vehicle
+
+    def close(self) -> None:
+        self._stop.set()
+        self.thread.join(5)
+        self.server.close()
+        if self.error is not None:
+            raise self.error
+
+
+def wait_until(predicate: Callable[[], bool], timeout: float, what: str) -> None:
+    end = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < end, f"timed out after {timeout} s waiting for {what}"
+        time.sleep(0.05)

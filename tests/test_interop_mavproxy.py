@@ -1,0 +1,72 @@
+"""MAVProxy (the pip package, headless, reading commands on stdin) flies the simulated vehicle over loopback."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.interop import ServedVehicle, wait_until
+from vehicle.app import State
+
+PLAN = ("QGC WPL 110\n"
+        "0\t1\t2\t44002\t30\t0\t-1\t-1\t0\t0\t0\t1\n"
+        "1\t0\t2\t44003\t0\t0\t0\t0\t0\t0\t0\t1\n"
+        "2\t0\t2\t19\t20\t0\t0\t0\t0\t0\t0\t1\n")
+
+
+def _mavproxy() -> list[str]:
+    exe = shutil.which("mavproxy.py") or str(Path(sys.executable).with_name("mavproxy.py"))
+    return [sys.executable, exe]
+
+
+@pytest.fixture()
+def mavproxy(tmp_path):
+    served = ServedVehicle("tunnel")
+    log = tmp_path / "mavproxy.txt"
+    proc = subprocess.Popen(
+        [*_mavproxy(), f"--master=udpin:127.0.0.1:{served.gcs_port}", "--dialect=returnlink",
+         "--state-basedir", str(tmp_path), "--default-modules=wp,param,mode,cmdlong,link,log"],
+        stdin=subprocess.PIPE, stdout=log.open("w"), stderr=subprocess.STDOUT, text=True, cwd=tmp_path)
+
+    def say(command: str) -> None:
+        proc.stdin.write(command + "\n")
+        proc.stdin.flush()
+
+    try:
+        wait_until(lambda: "Received 16 parameters" in log.read_text(), 30, "MAVProxy to fetch the parameters")
+        yield served, say, log
+    finally:
+        proc.kill()
+        proc.wait(5)
+        served.close()
+
+
+def test_param_set_show_and_refusal(mavproxy):
+    served, say, log = mavproxy
+    say("param set LNK_TIMEOUT 5")
+    wait_until(lambda: served.vehicle.params["LNK_TIMEOUT"] == 5.0, 10, "LNK_TIMEOUT = 5 on the vehicle")
+    say("param show LNK_TIMEOUT")
+    wait_until(lambda: "LNK_TIMEOUT      5.0" in log.read_text(), 10, "param show to print 5.0")
+    say("param set LNK_TIMEOUT 999")
+    wait_until(lambda: "outside 0.5..120" in log.read_text(), 10, "the refusal STATUSTEXT in MAVProxy")
+    time.sleep(0.5)
+    assert served.vehicle.params["LNK_TIMEOUT"] == 5.0
+
+
+def test_wp_load_schedules_the_plan_and_mode_rtl_returns(mavproxy, tmp_path):
+    served, say, log = mavproxy
+    plan = tmp_path / "plan.txt"
+    plan.write_text(PLAN)
+    say(f"wp load {plan}")
+    wait_until(lambda: "TYPE_MISSION: ACCEPTED" in log.read_text(), 15, "MISSION_ACK accepted")
+    assert len(served.vehicle.book.plan) == 2
+    assert [it.command for it in served.vehicle.plan_items] == [44002, 44003, 19]
+    say("mode RTL")
+    wait_until(lambda: "DO_SET_MODE: ACCEPTED" in log.read_text(), 10, "DO_SET_MODE accepted")
+    wait_until(lambda: served.vehicle.state() in (State.RETURNING, State.HOLDING), 5, "the return plan to run")
+    assert any(e.reason.name == "OPERATOR_EXPIRE" for e in served.vehicle.event_log)
