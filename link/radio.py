@@ -46,22 +46,33 @@ class Radio:
         self.p = params
         self.attenuation = attenuation
         self.rng = np.random.default_rng(seed)
-        self._shadow = 0.0
-        self._shadow_at: tuple[float, float] | None = None
+        self.seed = seed
+        self._cells: dict[tuple[int, int], float] = {}
         self.sent = 0
         self.lost = 0
 
+    def _cell(self, i: int, j: int) -> float:
+        v = self._cells.get((i, j))
+        if v is None:
+            v = float(np.random.default_rng([self.seed, i & 0xFFFFFFFF, j & 0xFFFFFFFF]).normal())
+            self._cells[(i, j)] = v
+        return v
+
     def _shadowing(self, x: float, y: float) -> float:
-        """Gauss-Markov along the robot's path: correlated over ``shadowing_corr_m`` metres of travel."""
-        if self._shadow_at is None:
-            self._shadow = self.rng.normal(0.0, self.p.shadowing_db)
-        else:
-            d = math.hypot(x - self._shadow_at[0], y - self._shadow_at[1])
-            if d > 0:
-                rho = math.exp(-d / self.p.shadowing_corr_m)
-                self._shadow = rho * self._shadow + math.sqrt(1 - rho * rho) * self.rng.normal(0.0, self.p.shadowing_db)
-        self._shadow_at = (x, y)
-        return self._shadow
+        """A fixed random field over the ground, correlated over ``shadowing_corr_m``: bilinear value noise.
+
+        It must be a function of place, not of the path travelled, or a robot that backtracks to where the link
+        was good would find a different channel there; real shadowing comes from the terrain and stays put.
+        """
+        c = self.p.shadowing_corr_m
+        gx, gy = x / c, y / c
+        i, j = math.floor(gx), math.floor(gy)
+        u, v = gx - i, gy - j
+        su, sv = u * u * (3 - 2 * u), v * v * (3 - 2 * v)  # smoothstep: no creases at cell edges
+        top = self._cell(i, j) * (1 - su) + self._cell(i + 1, j) * su
+        bottom = self._cell(i, j + 1) * (1 - su) + self._cell(i + 1, j + 1) * su
+        # bilinear blending shrinks the spread between grid points; scale it back to roughly shadowing_db
+        return self.p.shadowing_db * 1.4 * (top * (1 - sv) + bottom * sv)
 
     def link(self, antenna: tuple[float, float], power_dbm: float, robot: tuple[float, float]) -> LinkState:
         """Channel state between an antenna and the robot; call once per control tick."""

@@ -49,7 +49,8 @@ def compute(run: Run) -> dict:
         heard = next((h for t, h in run.losses if abs(t - comms_return.t) < 1e-9), None)
         if heard is not None:
             reaction = comms_return.t - heard - timeout
-    regained = next((e.t for e in v.event_log if e.reason.name == "LINK_REGAINED"), None)
+    # the link counts as back when the vehicle says so: LINK_REGAINED ending a block, or after a block completed
+    regained = run.link_backs[0][0] if run.link_backs else None
     blocks = run.blocks
     distance_back = sum(b.distance for b in blocks)
     max_disp = max((b.max_disp for b in blocks), default=0.0)
@@ -95,7 +96,7 @@ def verdict(run: Run, m: dict) -> list[str]:
     if c.return_started is not None and (m["return_started_s"] is not None) != c.return_started:
         out.append("no return started" if c.return_started else "a return started")
     if c.link_regained is not None and (m["link_regained_s"] is not None) != c.link_regained:
-        out.append("link never regained during a return" if c.link_regained else "link regained")
+        out.append("link never regained after the loss" if c.link_regained else "link regained")
     if c.max_final_target_error_m is not None and m["final_target_error_m"] is not None \
             and m["final_target_error_m"] > c.max_final_target_error_m:
         out.append(f"final target error {m['final_target_error_m']} m > {c.max_final_target_error_m} m")

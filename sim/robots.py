@@ -43,6 +43,7 @@ class Robot:
         self.speed = 0.0  # commanded-after-limits forward speed
         self.yaw_rate = 0.0
         self.odometer = 0.0
+        self.true_speed = 0.0
 
     def command(self, speed: float, yaw_rate: float) -> None:
         self.cmd_speed = max(-self.max_speed, min(self.max_speed, speed))

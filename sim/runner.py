@@ -114,6 +114,7 @@ class Run:
         self.stopped = False
         self.metrics: dict | None = None
         self.next_radio_status = 0.0
+        self.link_backs: list[tuple[float, float | None]] = []  # (link regained, start of the contact run)
         self.regains: list[tuple[float, float | None]] = []  # (LINK_REGAINED time, start of the contact run)
         self.losses: list[tuple[float, float | None]] = []  # (COMMS_LOST time, owner last heard before it)
 
@@ -151,8 +152,10 @@ class Run:
         for st in self.stations.values():
             if st.alive and st.operator is not None:
                 st.operator.step(t)
-        n_events, heard = len(v.event_log), v.book.link.last_heard
+        n_events, heard, was_lost = len(v.event_log), v.book.link.last_heard, v.book.link.lost
         v.tick(t)
+        if was_lost and not v.book.link.lost and v.book.owner is not None:
+            self.link_backs.append((t, v.book.link.contact_since))
         for e in v.event_log[n_events:]:
             if e.reason.name == "COMMS_LOST":
                 self.losses.append((e.t, heard))

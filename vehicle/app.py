@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -29,6 +30,7 @@ from vehicle.lease import (
     Verdict,
 )
 from vehicle.params import Params
+from vehicle.returning import LINK_TAG_LAG_S
 from vehicle.service import (
     NAV_LOITER_TIME,
     NAV_WAYPOINT,
@@ -47,7 +49,7 @@ SETPOINT_TTL = 0.5  # s: a teleop setpoint not refreshed this long is dropped (d
 MAX_TELEOP_SPEED = 2.0  # m/s at full stick
 MAX_TELEOP_YAW_RATE = 1.2  # rad/s at full stick
 GOOD_LINK_QUALITY = 0.8  # share of the owner's packets arriving (from MAVLink sequence gaps) for a link-good crumb
-QUALITY_TAU = 1.0  # s: time constant of the link-quality estimate
+QUALITY_TAU = LINK_TAG_LAG_S  # s: time constant of the link-quality estimate
 
 
 @dataclass
@@ -128,6 +130,8 @@ class Vehicle:
         self.outbound_speed = 0.0
         self.readings: Readings | None = None
         self.quality: dict[int, LinkQuality] = {}
+        self.last_good_packet: float | None = None  # the owner's last packet heard with good link quality
+        self._crumbs: deque[Crumb] = deque()  # recorded, waiting for their link tag to be final
         self.last_fix: tuple[float, float] | None = None  # the last fix used, for GPS_RAW_INT
         self.last_fix_t: float | None = None
         self.command_out = (0.0, 0.0)
@@ -161,9 +165,14 @@ class Vehicle:
         self._apply(self.book.admit(sender, compid, t, self.seed))
 
     def heard(self, sysid: int, t: float, seq: int | None = None) -> None:
-        self.book = self.book.heard(sysid, t)
+        good = True
         if seq is not None:
-            self.quality.setdefault(sysid, LinkQuality()).update(seq, t)
+            q = self.quality.setdefault(sysid, LinkQuality())
+            q.update(seq, t)
+            good = q.value(t) >= GOOD_LINK_QUALITY
+        self.book = self.book.heard(sysid, t, good)
+        if good and sysid == self.book.owner:
+            self.last_good_packet = t
 
     def acquire(self, sender: int, compid: int, t: float, allow_takeover: bool) -> Check:
         if not self.book.may_take(sender, t):
@@ -347,18 +356,31 @@ class Vehicle:
         if r.fix is not None and est.fix(r.fix.x, r.fix.y, r.fix.std):
             self.last_fix, self.last_fix_t = (r.fix.x, r.fix.y), t
         p = est.pose
-        self.trail.add(Crumb(p.x, p.y, t, p.std, self.link_good(t)))
+        self._crumbs.append(Crumb(p.x, p.y, t, p.std, self.link_good(t)))
 
-        was_lost = self.book.link.lost
         self._apply(self.book.tick(t))
-        if self.book.link.lost and not was_lost and self.book.link.last_heard is not None:
-            self.trail.mark_lost_since(self.book.link.last_heard)
+        cur = self.book.current
+        self._lay_crumbs(t, flush=cur is not None and cur.holder is Holder.RETURN_SERVICE)
         speed, yaw_rate = self._control(t, p.x, p.y, p.yaw)
         if not self.armed:
             speed, yaw_rate = 0.0, 0.0
         self.command_out = (speed, yaw_rate)
         self.driver.command(speed, yaw_rate)
         return speed, yaw_rate
+
+    def _lay_crumbs(self, t: float, flush: bool) -> None:
+        """Crumbs reach the trail once their link tag is final, LNK_GOOD_S after they were recorded.
+
+        A crumb is link-good only if the owner was heard well there *and* heard well again afterwards: the last
+        stretch before the link died was driven while the silence was still shorter than LNK_GOOD_S, and must
+        not become a return target. A return needs the whole trail, so it flushes them with what is known.
+        """
+        horizon = t if flush else t - self.params["LNK_GOOD_S"]
+        last = self.last_good_packet
+        while self._crumbs and self._crumbs[0].t <= horizon:
+            c = self._crumbs.popleft()
+            good = c.link_good and last is not None and last >= c.t
+            self.trail.add(c if good == c.link_good else replace(c, link_good=good))
 
     def _control(self, t: float, x: float, y: float, yaw: float) -> tuple[float, float]:
         book = self.book

@@ -170,8 +170,13 @@ class OwnerLink:
     contact_since: float | None = None  # start of the current run of continuous contact
     lost: bool = False  # silent for link_timeout and not yet regained
 
-    def heard(self, t: float, gap: float) -> OwnerLink:
-        continuous = self.last_heard is not None and t - self.last_heard <= gap
+    def heard(self, t: float, gap: float, good: bool = True) -> OwnerLink:
+        """A message from the owner. ``good`` False (most of its packets are being lost) keeps the lease alive
+        but breaks continuous contact: a trickle of lucky packets is not a regained link."""
+        if not good:
+            return replace(self, last_heard=t, contact_since=None)
+        continuous = (self.last_heard is not None and t - self.last_heard <= gap
+                      and self.contact_since is not None)
         return replace(self, last_heard=t, contact_since=self.contact_since if continuous else t)
 
     def age(self, t: float) -> float | None:
@@ -344,11 +349,11 @@ class LeaseBook:
         return Outcome(self)
 
     # ----- owner link --------------------------------------------------------------------------------------
-    def heard(self, sysid: int, t: float) -> LeaseBook:
+    def heard(self, sysid: int, t: float, good: bool = True) -> LeaseBook:
         """Any message from the owner keeps the lease alive; triggers are evaluated by ``tick``."""
         if sysid != self.owner:
             return self
-        return replace(self, link=self.link.heard(t, self.config.contact_gap))
+        return replace(self, link=self.link.heard(t, self.config.contact_gap, good))
 
     def tick(self, t: float) -> Outcome:
         """Evaluate the time-driven triggers: COMMS_LOST and LINK_REGAINED (DESIGN §3.5)."""

@@ -517,8 +517,11 @@ class Endpoint:
             self.last_control_key = control_key
             self.due[mav.MAVLINK_MSG_ID_CONTROL_STATUS] = t
         for msgid, interval in self.intervals.items():
-            if t + 1e-9 >= self.due.get(msgid, self.boot_t):
-                self.due[msgid] = t + interval
+            due = self.due.get(msgid, self.boot_t)
+            if t + 1e-9 >= due:
+                # keep the average rate exact although ticks are coarser than the interval
+                nxt = due + interval
+                self.due[msgid] = nxt if nxt > t else t + interval
                 self._emit(msgid, t)
         frames = self._sink.frames
         self._sink.frames = []

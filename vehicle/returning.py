@@ -14,6 +14,8 @@ import numpy as np
 
 from vehicle.trail import Trail
 
+LINK_TAG_LAG_S = 1.0  # the link-quality estimate behind a crumb's tag averages over about this long
+
 
 class Target(enum.IntEnum):
     """RTL_TARGET."""

@@ -16,7 +16,7 @@ import numpy as np
 from vehicle.lease import ExpireReason, ServiceBlock
 from vehicle.navigation import FollowerConfig, Path, follow
 from vehicle.params import Params
-from vehicle.returning import Route, Target, plan_route, truncate
+from vehicle.returning import LINK_TAG_LAG_S, Route, Target, plan_route, truncate
 from vehicle.trail import Trail
 
 # MAV_CMD numbers of the items a plan may hold
@@ -127,8 +127,11 @@ def _next_item(st: ServiceState, x: float, y: float, t: float, trail: Trail, par
         target = Target(int(it.param3)) if it.param3 >= 0 else Target(int(params["RTL_TARGET"]))
         # the displacement budget is measured from where the block started
         remaining = max(0.0, max_disp - math.hypot(x - st.start[0], y - st.start[1]))
+        # past the target crumb by the arrival radius (arrival then means reaching it) and by the distance the
+        # tag lags behind the link: the quality behind it averages over LINK_TAG_LAG_S of outbound driving
+        overshoot = params["RTL_ARRIVE_R"] + (outbound_speed or speed) * LINK_TAG_LAG_S
         route = plan_route(trail, (x, y), target, remaining, link_lost, heading=math.radians(it.x),
-                           overshoot=params["RTL_ARRIVE_R"])
+                           overshoot=overshoot)
         if target is not Target.HEADING:
             route = _bounded_from(route, st.start, max_disp)
     elif it.command == NAV_RETURN_TO_LAUNCH:

@@ -18,7 +18,7 @@ Why it looks like this (DESIGN §6, and what SmartRTL gets wrong):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -141,17 +141,6 @@ class Trail:
             self._commit(crumb, anchor=True)
             return
         self._extend(crumb)
-
-    def mark_lost_since(self, t: float) -> None:
-        """The link turned out to have been gone since ``t`` (the owner's last message). Crumbs recorded after it
-        were tagged good only because the silence was still shorter than LNK_GOOD_S; they are not places where
-        the operator could be heard, so they must not become return targets."""
-        n = self.count
-        self._good[:n][self._f[:n, 2] > t] = False
-        if self._pend is not None and self._pend.t > t:
-            self._pend = replace(self._pend, link_good=False)
-        if self._last is not None and self._last.t > t:
-            self._last = replace(self._last, link_good=False)
 
     # sleeve simplification -------------------------------------------------------------------------------
     def _reset_pending(self) -> None:

@@ -1,0 +1,113 @@
+"""Whole missions in simulated time: every built-in scenario with both robots, against its own criteria and the
+product's promises (DESIGN §3, §6, §7)."""
+
+from __future__ import annotations
+
+import functools
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import sim
+from sim import metrics
+from sim.runner import Run
+from sim.scenario import BUILTIN, load
+from vehicle.app import DT
+
+
+@functools.cache
+def run(name: str, vehicle: str, seed: int | None = None) -> tuple[Run, dict]:
+    r = Run(load(name), vehicle, seed).run()
+    r.metrics = metrics.compute(r)
+    return r, r.metrics
+
+
+def _run_file(tmp_path, base: str, extra: str) -> tuple[Run, dict]:
+    text = (Path(sim.__file__).parent / "scenarios" / f"{base}.toml").read_text() + "\n" + extra
+    path = tmp_path / f"{base}-variant.toml"
+    path.write_text(text)
+    r = Run(load(str(path))).run()
+    r.metrics = metrics.compute(r)
+    return r, r.metrics
+
+
+@pytest.mark.parametrize("vehicle", ["rover", "legged"])
+@pytest.mark.parametrize("name", BUILTIN)
+def test_scenario_meets_its_criteria(name, vehicle):
+    r, m = run(name, vehicle)
+    assert m["passed"], m["failures"]
+    assert tuple(m) == metrics.KEYS
+    assert m["stale_commands_executed"] == 0
+    assert m["return_started_s"] is not None
+
+
+@pytest.mark.parametrize("vehicle", ["rover", "legged"])
+@pytest.mark.parametrize("name", ["tunnel", "warehouse", "loop", "open"])
+def test_return_begins_within_one_tick_of_the_timeout(name, vehicle):
+    r, m = run(name, vehicle)
+    assert m["reaction_latency_s"] is not None
+    assert -1e-9 <= m["reaction_latency_s"] <= DT + 1e-9
+
+
+@pytest.mark.parametrize("vehicle", ["rover", "legged"])
+@pytest.mark.parametrize("name", ["tunnel", "warehouse", "loop", "open"])
+def test_stops_soon_after_the_link_is_back_and_inside_the_displacement_limit(name, vehicle):
+    r, m = run(name, vehicle)
+    params = r.vehicle.params
+    speed = params["RTL_SPEED"] or max(v for _, _, v in r.scenario.route)
+    for blk in r.blocks:
+        assert blk.max_disp <= blk.max_disp_allowed + metrics.DISPLACEMENT_SLACK
+        if blk.reason != "LINK_REGAINED":
+            continue
+        since = next(s for t, s in r.regains if abs(t - blk.ended) < 1e-6)
+        k0, k1 = int(round(since / DT)) - 1, int(round(blk.ended / DT)) - 1
+        path = np.array(r.trace.true[k0:k1 + 25])  # and the half second it takes to come to a stop
+        past = float(np.hypot(*np.diff(path, axis=0).T).sum())
+        assert past <= params["LNK_REGAIN_S"] * speed + params["RTL_ARRIVE_R"], f"drove {past:.2f} m past"
+
+
+def test_handover_refuses_the_first_station_after_takeover():
+    r, m = run("handover", "rover")
+    reasons = [e["reason"] for e in m["lease_events"]]
+    assert "ROOT_REPLACED" in reasons
+    assert r.vehicle.book.owner == r.scenario.station("bravo").sysid
+    assert m["commands_rejected"] > 0 and m["stale_commands_executed"] == 0
+    alpha = r.stations["alpha"].gs
+    assert any("refused" in text for _, text in alpha.texts)  # alpha was told, not silently ignored
+    revived = r.scenario.events[2].t
+    k = int(round(revived / DT))
+    moved = np.hypot(*np.diff(np.array(r.trace.true[k:]), axis=0).T).sum()
+    assert moved < 0.05  # alpha's stream after it came back never drove the robot
+
+
+def test_fallback_chain_runs_block_by_block_when_the_link_never_returns(tmp_path):
+    r, m = _run_file(tmp_path, "tunnel", '[[events]]\nt = 25.0\naction = "jam"\n')
+    assert [b.reason for b in r.blocks] == ["COMPLETED", "COMPLETED", "COMPLETED"]
+    holders = [e.holder.name for e in r.vehicle.event_log if e.reason.name in ("COMMS_LOST", "COMPLETED")]
+    assert holders == ["RETURN_SERVICE", "RETURN_SERVICE", "RETURN_SERVICE", "OPERATOR"]
+    loiter = r.blocks[1]
+    assert loiter.ended - loiter.started == pytest.approx(30.0, abs=0.1) and loiter.distance < 0.5  # braking only
+    home = r.scenario.start[:2]
+    assert math.dist(r.blocks[2].end, home) < 2.0  # retraced the whole trail to its start
+    assert m["link_regained_s"] is None
+
+
+def test_a_rearmed_return_protects_the_operator_after_resuming(tmp_path):
+    r, m = _run_file(tmp_path, "tunnel", '[[events]]\nt = 62.0\naction = "jam"\nduration = 8.0\n')
+    losses = [e for e in r.vehicle.event_log if e.reason.name == "COMMS_LOST"]
+    assert len(losses) == 2 and all(e.holder.name == "RETURN_SERVICE" for e in losses)
+    assert losses[1].t > 62.0
+    second = [b for b in r.blocks if b.started >= losses[1].t - 1e-9]
+    assert second and second[0].distance > 0.5
+
+
+def test_same_scenario_and_seed_give_identical_metrics():
+    a = metrics.compute(Run(load("loop"), "rover", 7).run())
+    b = metrics.compute(Run(load("loop"), "rover", 7).run())
+    a.pop("real_time_factor")
+    b.pop("real_time_factor")
+    assert a == b
+    c = metrics.compute(Run(load("loop"), "rover", 8).run())
+    assert c["lease_events"] != a["lease_events"] or c["estimator_rmse_m"] != a["estimator_rmse_m"]

@@ -1,0 +1,194 @@
+"""The MAVLink endpoint against the ground-station library, in simulated time."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from gcs.plans import parse_spec
+from tests.harness import Pair
+from vehicle.app import State
+from vehicle.mavlink import decode_mode, mav
+
+
+def acquired(pair: Pair) -> Pair:
+    pair.connect()
+    p = pair.gs.acquire()
+    pair.until(lambda: p.done, 2, "ACK")
+    assert p.ok and p.param2 == pair.vehicle.book.epoch
+    pair.until(lambda: pair.gs.vehicle.status.epoch == p.param2, 2, "the new epoch")
+    a = pair.gs.arm()
+    pair.until(lambda: a.done, 2, "arm ACK")
+    return pair
+
+
+def test_heartbeat_and_telemetry_set():
+    pair = Pair()
+    pair.step(2.0)
+    seen = {pair.endpoint.parser.parse_buffer(f)[0].get_type() for f in pair.heard}
+    assert {"HEARTBEAT", "SYS_STATUS", "GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "ATTITUDE", "GPS_RAW_INT",
+            "EXTENDED_SYS_STATE", "HOME_POSITION", "MISSION_CURRENT", "CONTROL_STATUS", "LEASE_STATUS"} <= seen
+    hb = pair.gs.vehicle
+    assert hb.mav_type == mav.MAV_TYPE_GROUND_ROVER and not hb.armed
+
+
+def test_set_message_interval_changes_the_rate():
+    pair = Pair()
+    p = pair.gs.command(mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAVLINK_MSG_ID_ATTITUDE, 50_000)
+    pair.step(0.1)
+    assert p.ok
+    count = len(pair.heard)
+    pair.heard.clear()
+    pair.step(1.0)
+    n = sum(1 for f in pair.heard if pair.endpoint.parser.parse_buffer(f)[0].get_type() == "ATTITUDE")
+    assert 18 <= n <= 22 and count > 0
+    q = pair.gs.command(mav.MAV_CMD_SET_MESSAGE_INTERVAL, 9999, 50_000)  # no such telemetry
+    pair.step(0.1)
+    assert q.result == mav.MAV_RESULT_DENIED
+
+
+def test_request_message_autopilot_version_capabilities():
+    pair = Pair()
+    got = []
+    pair.gs.listeners.append(lambda m, t: got.append(m) if m.get_type() == "AUTOPILOT_VERSION" else None)
+    p = pair.gs.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+    pair.step(0.1)
+    assert p.ok and got
+    caps = got[0].capabilities
+    for bit in ("MISSION_INT", "COMMAND_INT", "MAVLINK2", "COMPONENT_ACCEPTS_GCS_CONTROL"):
+        assert caps & getattr(mav, f"MAV_PROTOCOL_CAPABILITY_{bit}")
+
+
+def test_unknown_command_is_unsupported_and_changes_nothing():
+    pair = acquired(Pair())
+    before = pair.vehicle.book
+    p = pair.gs.command(31999, 1, 2, 3)
+    pair.step(0.1)
+    assert p.result == mav.MAV_RESULT_UNSUPPORTED
+    assert pair.vehicle.book.epoch == before.epoch and pair.vehicle.book.current == before.current
+
+
+def test_lease_claim_expire_and_stale_guard():
+    pair = acquired(Pair())
+    gs = pair.gs
+    e = gs.expire()
+    pair.until(lambda: e.done, 2, "ACK")
+    assert e.ok and pair.vehicle.state() == State.RETURNING
+    gs.drive_velocity(1.0, 0.0)  # the operator's old lease is expired: refused, never executed
+    pair.step(0.5)
+    assert pair.vehicle.setpoint is None and pair.vehicle.commands_rejected >= 3
+    assert any("refused" in text for _, text in gs.texts)
+    gs.stop_streaming()
+    c = gs.claim(0)  # a newer lease over the running return (NEWER_LEASE)
+    pair.until(lambda: c.done, 2, "ACK")
+    assert c.ok and c.param2 == pair.vehicle.book.current.index
+    assert pair.vehicle.event_log[-1].reason.name == "NEWER_LEASE"
+    bad = gs.command(mav.MAV_CMD_LEASE_CLAIM, pair.vehicle.book.epoch + 1, 0)  # wrong epoch
+    pair.step(0.1)
+    assert bad.result == mav.MAV_RESULT_DENIED
+
+
+def test_other_station_is_not_in_control_and_may_not_upload():
+    pair = Pair(stations=(255, 200))
+    acquired(pair)
+    other = pair.stations[200]
+    p = other.rtl()
+    tr = other.upload(parse_spec("loiter:5"))
+    pair.step(0.5)
+    assert p.result == mav.MAV_RESULT_NOT_IN_CONTROL
+    assert tr.done and tr.result == mav.MAV_MISSION_DENIED
+    assert pair.vehicle.plan_items == ()
+
+
+def test_mission_upload_download_and_refusal_keeps_the_old_plan():
+    pair = acquired(Pair())
+    gs = pair.gs
+    items = parse_spec("rtl:40 | loiter:10 | launch")
+    tr = gs.upload(items)
+    pair.until(lambda: tr.done, 3, "MISSION_ACK")
+    assert tr.ok and len(pair.vehicle.book.plan) == 3 and pair.vehicle.book.scheduled
+    down = gs.download()
+    pair.until(lambda: down.done, 3, "download")
+    assert [(i.command, i.param1) for i in down.items] == [(i.command, i.param1) for i in items]
+    bad = parse_spec("rtl:40") + [parse_spec("rtl")[0].__class__(1, 2, 22, 0, 1, 0, 0, 0, 0, 0, 0, 0.0, 0)]
+    tr = gs.upload(bad)  # MAV_CMD_NAV_TAKEOFF has no place in a return plan
+    pair.until(lambda: tr.done, 3, "MISSION_ACK")
+    assert tr.result == mav.MAV_MISSION_UNSUPPORTED and len(pair.vehicle.book.plan) == 3
+
+
+def test_truncated_upload_times_out_and_keeps_the_old_plan():
+    pair = acquired(Pair())
+    gs = pair.gs
+    tr = gs.upload(parse_spec("rtl:30 | loiter:5"))
+    pair.until(lambda: tr.done, 3, "upload")
+    old = pair.vehicle.book.plan
+    gs.mav.mission_count_send(1, 1, 4, 0)  # announce 4 items, then go silent
+    gs.transfer = None
+    acks = []
+    gs.listeners.append(lambda m, t: acks.append(m.type) if m.get_type() == "MISSION_ACK" else None)
+    pair.step(4.0)
+    assert acks == [mav.MAV_MISSION_OPERATION_CANCELLED]
+    assert pair.vehicle.book.plan == old and pair.endpoint.missions.uploads_cancelled == 1
+
+
+def test_fence_and_rally_lists_are_stored_but_not_the_return_plan():
+    pair = acquired(Pair())
+    items = parse_spec("wp:10:0 wp:0:10")
+    tr = pair.gs.upload(items, mission_type=1)
+    pair.until(lambda: tr.done, 3, "upload")
+    assert tr.ok and pair.vehicle.plan_items == ()
+    down = pair.gs.download(mission_type=1)
+    pair.until(lambda: down.done, 3, "download")
+    assert [i.x for i in down.items] == [i.x for i in items]
+
+
+def test_params_real32_range_refusal_and_sixteen_char_names():
+    pair = Pair()
+    gs = pair.gs
+    gs.param_request_all()
+    pair.step(0.1)
+    assert len(gs.vehicle.params) == 16 and gs.vehicle.param_count == 16
+    gs.param_set("LNK_TIMEOUT", 999.0)
+    pair.step(0.1)
+    assert gs.vehicle.params["LNK_TIMEOUT"] == 3.0 and pair.vehicle.params["LNK_TIMEOUT"] == 3.0
+    assert any("outside" in text for _, text in gs.texts)
+    gs.param_set("LEASE_STALE_TAKE", 0.0)  # 16 characters: no terminating NUL on the wire
+    pair.step(0.1)
+    assert pair.vehicle.params["LEASE_STALE_TAKE"] == 0.0 and pair.vehicle.book.config.stale_take is False
+    gs.param_set("NO_SUCH_PARAM_XX", 1.0)
+    pair.step(0.1)
+    assert "NO_SUCH_PARAM_XX" not in gs.vehicle.params
+
+
+def test_rtl_mode_both_encodings_and_hold():
+    assert decode_mode(1, 4, 5) == "RTL" and decode_mode(1, 11, 0) == "RTL" and decode_mode(1, 12, 0) == "RTL"
+    assert decode_mode(1, 4, 3) == "HOLD" and decode_mode(1, 4, 0) == "HOLD"
+    assert decode_mode(1, 3, 0) == "MANUAL" and decode_mode(1, 0, 0) == "MANUAL" and decode_mode(0, 4, 5) is None
+    pair = acquired(Pair())
+    pair.gs.drive_velocity(1.0, 0.0)
+    pair.step(4.0)
+    pair.gs.stop_streaming()
+    p = pair.gs.command(mav.MAV_CMD_DO_SET_MODE, 1, 11)  # ArduPilot Rover RTL, as MAVProxy sends it
+    pair.step(0.2)
+    assert p.ok and pair.vehicle.state() == State.RETURNING
+    pair.step(1.0)
+    assert pair.gs.vehicle.custom_mode == (4 << 16) | (5 << 24)  # PX4 AUTO_RTL in the heartbeat
+    h = pair.gs.hold()
+    pair.step(0.2)
+    assert h.ok and pair.vehicle.state() == State.TELEOP and pair.vehicle.holding
+
+
+def test_teleop_moves_and_dies_with_its_lease():
+    pair = acquired(Pair())
+    x0 = pair.driver.pose[0]
+    pair.gs.drive_velocity(1.0, 0.0)
+    pair.step(3.0)
+    assert pair.driver.pose[0] - x0 > 1.5
+    pair.gs.stop_streaming()  # the dead-man: no fresh setpoint, the robot stops
+    pair.step(2.0)
+    assert abs(pair.vehicle.command_out[0]) < 1e-9
+    pair.gs.drive_manual(0.5, 0.0)
+    pair.step(1.0)
+    assert pair.vehicle.command_out[0] == pytest.approx(1.0)
+    assert math.isfinite(pair.vehicle.estimator.pose.x)
