@@ -16,7 +16,7 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/returnlink demo
+	$(BIN)/returnlink sim run tunnel --out out/demo
 
 test: $(STAMP)
 	$(BIN)/ruff check .

@@ -48,6 +48,7 @@ class Radio:
         self.rng = np.random.default_rng(seed)
         self.seed = seed
         self._cells: dict[tuple[int, int], float] = {}
+        self._last: dict[tuple, tuple[tuple[float, float], LinkState]] = {}
         self.sent = 0
         self.lost = 0
 
@@ -75,7 +76,17 @@ class Radio:
         return self.p.shadowing_db * 1.4 * (top * (1 - sv) + bottom * sv)
 
     def link(self, antenna: tuple[float, float], power_dbm: float, robot: tuple[float, float]) -> LinkState:
-        """Channel state between an antenna and the robot; call once per control tick."""
+        """Channel state between an antenna and the robot; call once per control tick. A robot standing still
+        (within a centimetre) has the same channel, so the wall queries are not repeated."""
+        key = (antenna, power_dbm)
+        hit = self._last.get(key)
+        if hit is not None and abs(hit[0][0] - robot[0]) < 0.01 and abs(hit[0][1] - robot[1]) < 0.01:
+            return hit[1]
+        state = self._link(antenna, power_dbm, robot)
+        self._last[key] = ((robot[0], robot[1]), state)
+        return state
+
+    def _link(self, antenna: tuple[float, float], power_dbm: float, robot: tuple[float, float]) -> LinkState:
         d = max(1.0, math.hypot(robot[0] - antenna[0], robot[1] - antenna[1]))
         loss = self.p.ref_loss_db + 10.0 * self.p.exponent * math.log10(d)
         loss += self.attenuation(antenna, robot)

@@ -103,7 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
     d = sub.add_parser("dialect", help="the returnlink MAVLink dialect")
     d.add_argument("action", choices=["install", "path"], help="install: generate and register the pymavlink module")
     d.set_defaults(func=_cmd_dialect)
-    demo = sub.add_parser("demo", help="the default demonstration")
+    demo = sub.add_parser("demo", help="the FIG. 2-3 lease sequence, printed from the real lease code")
     demo.set_defaults(func=_cmd_demo)
     sim = sub.add_parser("sim", help="the simulator").add_subparsers(dest="sim_command", required=True)
     run = sim.add_parser("run", help="run a scenario in lockstep, as fast as possible")

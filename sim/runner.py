@@ -60,6 +60,7 @@ class Trace:
     rssi: list[float] = field(default_factory=list)
     heard: list[bool] = field(default_factory=list)  # owner heard within LNK_GOOD_S (the vehicle's view)
     owner: list[int] = field(default_factory=list)
+    cmd: list[tuple[float, float]] = field(default_factory=list)  # what the vehicle commanded the robot
 
 
 @dataclass
@@ -82,7 +83,7 @@ class BlockRecord:
 
 class Run:
     def __init__(self, scenario: Scenario, vehicle: str | None = None, seed: int | None = None,
-                 progress: bool = False) -> None:
+                 progress: bool = False, duration: float | None = None) -> None:
         self.scenario = sc = scenario
         self.kind = vehicle or sc.vehicle
         self.seed = sc.seed if seed is None else seed
@@ -106,6 +107,7 @@ class Run:
         self.events = sorted(sc.events, key=lambda e: e.t)
         self.jams: list[tuple[float, float, str]] = []  # (from, until, station or "")
         self.t = 0.0
+        self.duration = sc.duration if duration is None else duration
         self.trace = Trace()
         self.blocks: list[BlockRecord] = []
         self.tlog: list[bytes] = []
@@ -121,7 +123,7 @@ class Run:
     # ----- the loop ------------------------------------------------------------------------------------------
     def run(self) -> Run:
         w0 = time.perf_counter()
-        n = int(round(self.scenario.duration / DT))
+        n = int(round(self.duration / DT))
         shown = -1
         for k in range(n):
             self.step()
@@ -252,6 +254,7 @@ class Run:
         tr.rssi.append(math.nan if op.state is None else op.state.rssi_dbm)
         tr.heard.append(v.link_good(t))
         tr.owner.append(v.book.owner or 0)
+        tr.cmd.append(v.command_out)
         returning = cur is not None and cur.holder is Holder.RETURN_SERVICE
         blk = self.blocks[-1] if self.blocks and self.blocks[-1].ended is None else None
         if blk is not None and (not returning or cur.index != blk.index):

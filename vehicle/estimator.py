@@ -74,21 +74,32 @@ class Estimator:
         self.t = t
         self.fixes_used = 0
         self.fixes_rejected = 0
+        self._F = np.eye(4)
+        self._Q = np.zeros((4, 4))
+        self._pose: Pose | None = None
 
     def predict(self, speed: float, yaw_rate: float, t: float) -> None:
+        """Unicycle prediction over ``t - self.t``: the filter's own model (``_EKF.predict_x``) for the state, and
+        P = F P F' + Q written out for 4x4, because at 50 Hz the generic matrix path dominated the tick."""
         dt = t - self.t
         if dt <= 0:
             return
         c = self.config
         f = self._f
-        f.F = np.eye(4)
+        F = self._F
+        F[0, 2] = F[1, 2] = F[2, 3] = 0.0
+        f.F = F
         yaw = float(f.x[2, 0])
         qv, qw, qb = (c.speed_noise**2) * dt, (c.gyro_noise**2) * dt, (c.bias_walk**2) * dt
         cs, sn = math.cos(yaw), math.sin(yaw)
-        f.Q = np.array([[qv * cs * cs, qv * cs * sn, 0, 0], [qv * cs * sn, qv * sn * sn, 0, 0],
-                        [0, 0, qw, 0], [0, 0, 0, qb]])
-        f.predict(u=np.array([speed, yaw_rate, dt]))
+        Q = self._Q
+        Q[0, 0], Q[0, 1], Q[1, 0], Q[1, 1] = qv * cs * cs, qv * cs * sn, qv * cs * sn, qv * sn * sn
+        Q[2, 2], Q[3, 3] = qw, qb
+        f.predict_x(np.array((speed, yaw_rate, dt)))
+        f.P = F @ f.P @ F.T + Q
+        f.x_prior, f.P_prior = f.x, f.P
         self.t = t
+        self._pose = None
 
     def fix(self, x: float, y: float, std: float) -> bool:
         """Fuse a position fix; returns False if it was gated out as an outlier."""
@@ -101,6 +112,7 @@ class Estimator:
             self.fixes_rejected += 1
             return False
         f.update(z, _jac_pos, _h_pos, R=np.eye(2) * std * std)
+        self._pose = None
         self.fixes_used += 1
         return True
 
@@ -113,14 +125,17 @@ class Estimator:
         K = f.P @ H.T / S
         f.x = f.x + K * innov
         f.P = (np.eye(4) - K @ H) @ f.P
+        self._pose = None
 
     @property
     def pose(self) -> Pose:
-        x = self._f.x[:, 0]
-        P = self._f.P
-        std = math.sqrt(max(0.0, 0.5 * (P[0, 0] + P[1, 1])))
-        yaw = (x[2] + math.pi) % (2 * math.pi) - math.pi
-        return Pose(float(x[0]), float(x[1]), float(yaw), std, self.t)
+        if self._pose is None:
+            x = self._f.x[:, 0]
+            P = self._f.P
+            std = math.sqrt(max(0.0, 0.5 * (P[0, 0] + P[1, 1])))
+            yaw = (x[2] + math.pi) % (2 * math.pi) - math.pi
+            self._pose = Pose(float(x[0]), float(x[1]), float(yaw), std, self.t)
+        return self._pose
 
     @property
     def covariance(self) -> np.ndarray:
