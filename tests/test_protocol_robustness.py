@@ -139,3 +139,23 @@ def test_mission_items_out_of_sequence_or_from_another_station_are_ignored():
     pair.endpoint.tick(pair.t)
     assert pair.endpoint.missions.upload is not None and pair.endpoint.missions.upload.items == []
     assert pair.vehicle.book.plan == old
+
+
+def test_every_supported_command_with_non_finite_parameters_gets_exactly_one_ack():
+    """Found by the property test above: SET_MESSAGE_INTERVAL with an infinite id raised and went unanswered."""
+    from vehicle.mavlink import COMMANDS
+
+    pair = owned_pair()
+    stranger, owner = _encoder(66), _encoder(255)
+    for command in COMMANDS:
+        for bad in (math.inf, -math.inf, math.nan, 1e30):
+            for pos in range(7):
+                p = [0.0] * 7
+                p[pos] = bad
+                for enc in (stranger, owner):
+                    pair.endpoint.receive(mav.MAVLink_command_long_message(1, 1, command, 0, *p).pack(enc), pair.t)
+                    frames = pair.endpoint.tick(pair.t)
+                    acks = [m for f in frames for m in pair.endpoint.parser.parse_buffer(f)
+                            if m.get_type() == "COMMAND_ACK"]
+                    assert len(acks) == 1, (command, bad, pos)
+                    pair.t += 3.1  # past the retry window: each is a new command

@@ -206,7 +206,11 @@ class Endpoint:
             self.counters.unsupported += 1
             result, param2 = mav.MAV_RESULT_UNSUPPORTED, 0
         else:
-            result, param2 = handler(self, p, sender, scomp, t)
+            try:
+                result, param2 = handler(self, p, sender, scomp, t)
+            except (ValueError, OverflowError) as e:  # NaN or infinity where a number is needed
+                self.statustext(f"command {command} refused: {e}", mav.MAV_SEVERITY_WARNING)
+                result, param2 = mav.MAV_RESULT_DENIED, 0
         self.answered[slot] = _Answered(key, t, result, param2)
         if len(self.answered) > 256:
             for k in sorted(self.answered, key=lambda k: self.answered[k].at)[:128]:
