@@ -192,3 +192,41 @@ def test_teleop_moves_and_dies_with_its_lease():
     pair.step(1.0)
     assert pair.vehicle.command_out[0] == pytest.approx(1.0)
     assert math.isfinite(pair.vehicle.estimator.pose.x)
+
+
+def test_mission_current_set_current_and_item_reached():
+    pair = acquired(Pair())
+    gs = pair.gs
+    tr = gs.upload(parse_spec("loiter:1 | loiter:1 | loiter:2"))
+    pair.until(lambda: tr.done, 3, "upload")
+    assert tr.ok
+    bad = gs.command(mav.MAV_CMD_DO_SET_MISSION_CURRENT, 9)
+    pair.step(0.1)
+    assert bad.result == mav.MAV_RESULT_DENIED
+    p = gs.command(mav.MAV_CMD_DO_SET_MISSION_CURRENT, 2)  # start the plan at its second block
+    pair.step(0.1)
+    assert p.ok and len(pair.vehicle.book.scheduled) == 2
+    reached, current = [], []
+    gs.listeners.append(lambda m, t: reached.append(m.seq) if m.get_type() == "MISSION_ITEM_REACHED" else None)
+    gs.listeners.append(lambda m, t: current.append((m.seq, m.mission_state))
+                        if m.get_type() == "MISSION_CURRENT" else None)
+    e = gs.expire()
+    pair.until(lambda: e.done, 2, "ACK")
+    pair.step(4.0)
+    assert reached == [2, 4]
+    assert (2, mav.MISSION_STATE_ACTIVE) in current and (4, mav.MISSION_STATE_ACTIVE) in current
+    assert pair.vehicle.state() == State.AWAITING_CLAIM
+
+
+def test_parameters_are_saved_back_to_the_parm_file(tmp_path):
+    from vehicle.params import load_defaults
+
+    parm = tmp_path / "vehicle.parm"
+    pair = Pair()
+    pair.endpoint.param_file = parm
+    pair.gs.param_set("RTL_MAX_DISP", 75.0)
+    pair.step(0.1)
+    assert load_defaults(parm)["RTL_MAX_DISP"] == 75.0
+    pair.gs.param_set("RTL_MAX_DISP", -1.0)  # refused: the file keeps the good value
+    pair.step(0.1)
+    assert load_defaults(parm)["RTL_MAX_DISP"] == 75.0
