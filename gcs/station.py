@@ -139,7 +139,7 @@ class GroundStation:
         self.transfer: Transfer | None = None
         self.events: list[LeaseEventRecord] = []
         self.texts: list[tuple[float, str]] = []
-        self._chunks: dict[int, list[bytes]] = {}
+        self._chunks: dict[int, dict[int, bytes]] = {}
         self.acks: list[tuple[float, int, int]] = []  # (t, command, result): every COMMAND_ACK received
         self.next_heartbeat = 0.0
         self.teleop: tuple[str, float, float, float] | None = None  # (kind, a, b, c) streamed at 10 Hz
@@ -355,10 +355,13 @@ class GroundStation:
         if not m.id:
             self.texts.append((t, text.decode("utf-8", "replace")))
             return
-        parts = self._chunks.setdefault(m.id, [])
-        parts.append(text)
+        parts = self._chunks.setdefault(m.id, {})
+        parts[m.chunk_seq] = text
         if len(text) < 50:
-            self.texts.append((t, b"".join(self._chunks.pop(m.id)).decode("utf-8", "replace")))
+            chunks = self._chunks.pop(m.id)
+            whole = all(k in chunks for k in range(m.chunk_seq + 1))
+            joined = b"".join(chunks[k] for k in sorted(chunks)).decode("utf-8", "replace")
+            self.texts.append((t, joined if whole else "..." + joined))  # '...': a chunk was lost
 
     def _on_command_ack(self, m, t: float) -> None:
         self.acks.append((t, m.command, m.result))

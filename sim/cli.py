@@ -81,6 +81,11 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
     except OSError as e:
         print(f"returnlink: error: cannot bind 127.0.0.1:{args.port}: {e}", file=sys.stderr)
         return 2
+    timeout = server.vehicle.params["LNK_TIMEOUT"]
+    if args.speedup > 1 and args.speedup >= timeout / 1.5:
+        print(f"returnlink: warning: ground stations send a heartbeat once a wall-clock second, which at --speedup "
+              f"{args.speedup:g} is once every {args.speedup:g} simulated s; with LNK_TIMEOUT {timeout:g} s the "
+              f"vehicle will think an idle station lost. Raise LNK_TIMEOUT or lower --speedup.", file=sys.stderr)
     host, port = server.address
     print(f"returnlink: {sc.name} ({server.kind}) on udp {host}:{port}, sending to "
           + ", ".join(f"{h}:{p}" for h, p in peers) + ("" if args.perfect_link else ", through the radio model"),
