@@ -8,7 +8,6 @@ trajectory plot of what happened.
 from __future__ import annotations
 
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +18,7 @@ from link.transports import UdpTransport
 from sim.driver import SimDriver
 from sim.plots import draw_trail, draw_world, plt, save
 from sim.scenario import Scenario
-from vehicle.app import DT, Vehicle
+from vehicle.app import DT, Vehicle, run
 from vehicle.mavlink import Endpoint
 from vehicle.params import load_defaults
 
@@ -50,40 +49,32 @@ class Server:
     def address(self) -> tuple[str, int]:
         return self.transport.address
 
-    def step(self) -> None:
-        v = self.vehicle
-        t = round(v.t + DT, 9)
-        for data in self.proxy.from_ground(t):
-            self.endpoint.receive(data, t)
-        v.tick(t)
+    def _receive(self, t: float) -> list[bytes]:
+        self.proxy.flush(t)
+        return self.proxy.from_ground(t)
+
+    def _after_tick(self, t: float) -> None:
+        """Physics between vehicle ticks, the channel for the new position, a trace for the plot."""
         self.driver.advance(DT)
         self.proxy.update(t)
-        for frame in self.endpoint.tick(t):
-            self.proxy.to_ground(frame, t)
-        self.proxy.flush(t)
         if int(round(t / DT)) % 10 == 0:
             x, y, _ = self.driver.pose
-            p = v.estimator.pose
+            p = self.vehicle.estimator.pose
             self.true.append((x, y))
             self.est.append((p.x, p.y))
+        if self._out is not None and t >= self._next_report:
+            self._next_report = t + self._report_every
+            p = self.vehicle.estimator.pose
+            st = self.proxy.state
+            link = "perfect" if st is None else f"{st.rssi_dbm:6.1f} dBm, delivery {st.delivery:4.2f}"
+            print(f"t={t:7.1f} s  state {self.endpoint.custom_mode():#010x}  owner {self.vehicle.book.owner}"
+                  f"  pos ({p.x:6.1f}, {p.y:6.1f})  link {link}", file=self._out, flush=True)
 
     def serve(self, speedup: float = 1.0, duration: float = float("inf"), stop=lambda: False,
               report_every: float = 5.0, out=sys.stderr) -> None:
-        w0 = time.monotonic()
-        next_report = 0.0
-        while self.vehicle.t < duration and not stop():
-            self.step()
-            t = self.vehicle.t
-            if out is not None and t >= next_report:
-                next_report = t + report_every
-                p = self.vehicle.estimator.pose
-                st = self.proxy.state
-                link = "perfect" if st is None else f"{st.rssi_dbm:6.1f} dBm, delivery {st.delivery:4.2f}"
-                print(f"t={t:7.1f} s  state {self.endpoint.custom_mode():#010x}  owner {self.vehicle.book.owner}"
-                      f"  pos ({p.x:6.1f}, {p.y:6.1f})  link {link}", file=out, flush=True)
-            wait = w0 + t / speedup - time.monotonic()
-            if wait > 0:
-                time.sleep(wait)
+        self._out, self._report_every, self._next_report = out, report_every, 0.0
+        run(self.vehicle, self.endpoint, self._receive, self.proxy.to_ground, speedup=speedup,
+            stop=lambda: self.vehicle.t >= duration or stop(), after_tick=self._after_tick)
 
     def close(self) -> None:
         self.transport.close()

@@ -438,22 +438,26 @@ def velocity_to_command(vn: float, ve: float, yaw_rate: float | None, yaw: float
     return speed * max(0.0, math.cos(err)), turn
 
 
-def run(vehicle: Vehicle, endpoint, clock: Callable[[], float], receive: Callable[[], list[bytes]],
-        send: Callable[[bytes], None], stop: Callable[[], bool], sleep: Callable[[float], None] = time.sleep,
-        speedup: float = 1.0, on_tick: Callable[[float], None] | None = None) -> None:
-    """The real-time shell: tick at 50 Hz of ``clock`` time (scaled by ``speedup``) until ``stop()``."""
-    t0 = clock()
-    n = 0
+def run(vehicle: Vehicle, endpoint, receive: Callable[[float], list[bytes]], send: Callable[[bytes, float], None],
+        clock: Callable[[], float] = time.monotonic, stop: Callable[[], bool] = lambda: False,
+        sleep: Callable[[float], None] = time.sleep, speedup: float = 1.0,
+        after_tick: Callable[[float], None] | None = None) -> None:
+    """The real-time shell around one vehicle: 50 Hz ticks paced by ``clock`` (``speedup`` times faster),
+    frames in through ``receive(t)`` and out through ``send(frame, t)``, until ``stop()``.
+
+    A real robot passes a UDP or serial link and its driver; the simulator passes the radio proxy and steps the
+    physics in ``after_tick``.
+    """
+    t0, start = clock(), vehicle.t
     while not stop():
-        t = vehicle.t + DT
-        for data in receive():
+        t = round(vehicle.t + DT, 9)
+        for data in receive(t):
             endpoint.receive(data, t)
-        if on_tick is not None:
-            on_tick(t)
         vehicle.tick(t)
-        for data in endpoint.tick(t):
-            send(data)
-        n += 1
-        wait = t0 + n * DT / speedup - clock()
+        if after_tick is not None:
+            after_tick(t)
+        for frame in endpoint.tick(t):
+            send(frame, t)
+        wait = t0 + (t - start) / speedup - clock()
         if wait > 0:
             sleep(wait)
