@@ -125,15 +125,18 @@ class Run:
         w0 = time.perf_counter()
         n = int(round(self.duration / DT))
         shown = -1
+        tty = sys.stderr.isatty()
+        step = 2 if tty else 25  # a redrawn bar on a terminal, a few lines in a log
         for k in range(n):
             self.step()
             if self.stopped:
                 break
-            if self.progress and (pct := 100 * (k + 1) // n) != shown and pct % 2 == 0:
+            if self.progress and (pct := 100 * (k + 1) // n) != shown and pct % step == 0:
                 shown = pct
                 bar = "#" * (pct // 4) + "." * (25 - pct // 4)
-                print(f"\r  [{bar}] {pct:3d}%  t={self.t:6.1f} s", end="", file=sys.stderr, flush=True)
-        if self.progress:
+                print(f"\r  [{bar}] {pct:3d}%  t={self.t:6.1f} s", end="" if tty else "\n", file=sys.stderr,
+                      flush=True)
+        if self.progress and tty:
             print(file=sys.stderr)
         self.wall = time.perf_counter() - w0
         self._close_block()
