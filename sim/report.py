@@ -13,12 +13,8 @@ from sim.runner import Run
 STATE_NAMES = ("NO_OWNER", "TELEOP", "AWAITING_CLAIM", "RETURNING", "HOLDING", "NAVIGATING")
 
 
-def trajectory(run: Run, path: Path) -> Path:
-    """Walls, denied zones, true and estimated paths, crumbs by link tag, return routes, displacement circles,
-    and where the link was lost and regained."""
+def _draw_run(ax, run: Run) -> None:
     v, tr = run.vehicle, run.trace
-    fig, ax = plt.subplots(figsize=(10, 7.5))
-    draw_world(ax, run.world, run.scenario.bounds)
     true, est = np.array(tr.true), np.array(tr.est)
     ax.plot(true[:, 1], true[:, 0], color="k", lw=0.9, alpha=0.55, label="true path")
     ax.plot(est[:, 1], est[:, 0], color="tab:orange", lw=0.9, alpha=0.8, label="estimated path")
@@ -30,7 +26,7 @@ def trajectory(run: Run, path: Path) -> Path:
         if b.target is not None:
             ax.plot(b.target[1], b.target[0], marker="*", ms=15, color="tab:blue", zorder=7, label="return target")
         if math.isfinite(b.max_disp_allowed) and b.max_disp_allowed < 5000:
-            a = np.linspace(0, 2 * math.pi, 200)
+            a = np.linspace(0, 2 * math.pi, 400)
             ax.plot(b.start[1] + b.max_disp_allowed * np.sin(a), b.start[0] + b.max_disp_allowed * np.cos(a),
                     ls="--", color="tab:blue", lw=0.8, label="max displacement")
         if b.end is not None:
@@ -40,16 +36,51 @@ def trajectory(run: Run, path: Path) -> Path:
         if heard is not None:
             x, y = run.true_at(heard)
             ax.plot(y, x, marker="X", ms=12, color="tab:red", zorder=9, label="link lost (last heard)")
-    for _t, since in run.regains:
+    for _t, since in run.link_backs:
         if since is not None:
             x, y = run.true_at(since)
             ax.plot(y, x, marker="P", ms=12, color="tab:green", zorder=9, label="link back")
+
+
+def _return_box(run: Run, margin: float = 3.0) -> tuple[float, float, float, float] | None:
+    """North/east extent of the returns and the link events, for a close-up."""
+    pts = []
+    for b in run.blocks:
+        pts += [b.start] + ([b.end] if b.end else []) + ([b.target] if b.target else [])
+        if b.route is not None:
+            pts += [tuple(p) for p in b.route]
+    pts += [run.true_at(h) for _t, h in run.losses if h is not None]
+    if not pts:
+        return None
+    a = np.array(pts)
+    return (a[:, 0].min() - margin, a[:, 1].min() - margin, a[:, 0].max() + margin, a[:, 1].max() + margin)
+
+
+def trajectory(run: Run, path: Path) -> Path:
+    """Walls, denied zones, true and estimated paths, crumbs by link tag, return routes, displacement circles,
+    and where the link was lost and regained; with a close-up of the returns when they are small on the map."""
+    fig, ax = plt.subplots(figsize=(11, 8))
+    draw_world(ax, run.world, run.scenario.bounds)
+    _draw_run(ax, run)
     m = run.metrics or {}
     ax.set_title(f"{run.scenario.name} ({run.kind}, seed {run.seed}): "
                  f"{'PASSED' if m.get('passed') else 'FAILED'}, back {m.get('distance_back_m')} m")
     handles, labels = ax.get_legend_handles_labels()
     uniq = dict(zip(labels, handles, strict=True))
-    ax.legend(uniq.values(), uniq.keys(), loc="best", fontsize=7)
+    ax.legend(uniq.values(), uniq.keys(), loc="upper left", fontsize=7)
+    box = _return_box(run)
+    bounds = run.scenario.bounds
+    if box is not None and max(box[2] - box[0], box[3] - box[1]) < 0.35 * max(bounds[2] - bounds[0],
+                                                                             bounds[3] - bounds[1]):
+        inset = ax.inset_axes((1.04, 0.0, 0.62, 0.62))
+        draw_world(inset, run.world)
+        _draw_run(inset, run)
+        side = max(box[2] - box[0], box[3] - box[1]) / 2
+        cn, ce = (box[0] + box[2]) / 2, (box[1] + box[3]) / 2
+        inset.set_xlim(ce - side, ce + side)
+        inset.set_ylim(cn - side, cn + side)
+        inset.set_title("close-up of the return", fontsize=9)
+        ax.indicate_inset_zoom(inset, edgecolor="0.4")
     return save(fig, path)
 
 
