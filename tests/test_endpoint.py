@@ -9,7 +9,8 @@ import pytest
 from gcs.plans import parse_spec
 from tests.harness import Pair
 from vehicle.app import State
-from vehicle.mavlink import decode_mode, mav
+from vehicle.mavlink import mav
+from vehicle.modes import decode_mode
 
 
 def acquired(pair: Pair) -> Pair:

@@ -14,46 +14,18 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from link import dialect
-from vehicle.app import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, State, Vehicle, velocity_to_command
-from vehicle.lease import Check, ExpireReason, Holder, RejectReason, Verdict
+from vehicle.app import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, Vehicle, velocity_to_command
+from vehicle.lease import Check, RejectReason, Verdict
 from vehicle.missions import ACCEPTED, DENIED, INVALID, UNSUPPORTED, Item, MissionServer, Origin, to_plan
+from vehicle.modes import decode_mode
 from vehicle.params import SPECS, ParamError, format_parm
 from vehicle.service import NAV_RETURN_TO_LINK, PlanItem
+from vehicle.telemetry import NO_INDEX, Telemetry
 
 mav = dialect.load()
 
-NO_INDEX = 65535
 RETRY_WINDOW = 3.0  # s: an identical command from the same sender within this is a retry, not a new command
 REJECT_NOTICE_GAP = 2.0  # s between STATUSTEXTs about a rejected stream (MANUAL_CONTROL, velocity targets)
-
-# PX4 custom_mode: main mode in bits 16-23, sub mode in bits 24-31
-PX4_MANUAL, PX4_POSCTL, PX4_AUTO = 1, 3, 4
-PX4_AUTO_LOITER, PX4_AUTO_MISSION, PX4_AUTO_RTL = 3, 4, 5
-# ArduPilot Rover mode numbers
-AP_MANUAL, AP_ACRO, AP_STEERING, AP_HOLD, AP_AUTO, AP_RTL, AP_SMART_RTL = 0, 1, 3, 4, 10, 11, 12
-
-HEALTH_SENSORS = (mav.MAV_SYS_STATUS_SENSOR_3D_GYRO | mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL
-                  | mav.MAV_SYS_STATUS_SENSOR_3D_MAG | mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
-                  | mav.MAV_SYS_STATUS_PREARM_CHECK)
-CAPABILITIES = (mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT
-                | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
-                | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mav.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
-                | mav.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
-                | mav.MAV_PROTOCOL_CAPABILITY_COMPONENT_ACCEPTS_GCS_CONTROL)
-
-# default telemetry intervals, s (changed with SET_MESSAGE_INTERVAL)
-DEFAULT_RATES = {
-    mav.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
-    mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
-    mav.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0,
-    mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 0.25,
-    mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 0.25,
-    mav.MAVLINK_MSG_ID_ATTITUDE: 0.25,
-    mav.MAVLINK_MSG_ID_HOME_POSITION: 5.0,
-    mav.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
-    mav.MAVLINK_MSG_ID_CONTROL_STATUS: 1.0,
-    mav.MAVLINK_MSG_ID_LEASE_STATUS: 0.5,
-}
 
 REJECT_RESULT = {
     RejectReason.NOT_IN_CONTROL: mav.MAV_RESULT_NOT_IN_CONTROL,
@@ -106,15 +78,13 @@ class Endpoint:
         self.parser = mav.MAVLink(None, 0, 0)
         self.parser.robust_parsing = True
         self.counters = Counters()
-        self.intervals = dict(DEFAULT_RATES)
-        self.due: dict[int, float] = {}
-        self.next_heartbeat = boot_t
         self.answered: dict[tuple[int, int, int], _Answered] = {}
         self.notice_at: dict[tuple[int, str], float] = {}
-        self.last_status_key: tuple | None = None
-        self.last_control_key: tuple | None = None
         self.statustext_id = 0
         self.missions = MissionServer(self._send, self._accept_mission)
+        self.telemetry = Telemetry(self.mav, vehicle, self.origin, boot_t,
+                                   lambda: (self.counters.frames, self.counters.bad_frames),
+                                   lambda: len(self.missions.lists[0]))
         self.t = boot_t
         self.log: Callable[[str], None] | None = None
 
@@ -134,9 +104,6 @@ class Endpoint:
             self.mav.statustext_send(severity, chunk, id=self.statustext_id, chunk_seq=n)
         if len(raw) % 50 == 0:
             self.mav.statustext_send(severity, b"", id=self.statustext_id, chunk_seq=len(chunks))
-
-    def _boot_ms(self, t: float) -> int:
-        return int(max(0.0, t - self.boot_t) * 1000) & 0xFFFFFFFF
 
     # ----- input ---------------------------------------------------------------------------------------------
     def receive(self, data: bytes, t: float) -> None:
@@ -267,31 +234,21 @@ class Endpoint:
 
     def _cmd_request_message(self, p, sender, scomp, t):
         msgid = int(p[0])
-        if not self._emit(msgid, t, on_request=True):
+        if not self.telemetry.emit(msgid, t):
             return mav.MAV_RESULT_DENIED, 0
         return mav.MAV_RESULT_ACCEPTED, 0
 
     def _cmd_autopilot_capabilities(self, p, sender, scomp, t):
-        self._emit(mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION, t, on_request=True)
+        self.telemetry.emit(mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION, t)
         return mav.MAV_RESULT_ACCEPTED, 0
 
     def _cmd_home(self, p, sender, scomp, t):
-        self._emit(mav.MAVLINK_MSG_ID_HOME_POSITION, t, on_request=True)
+        self.telemetry.emit(mav.MAVLINK_MSG_ID_HOME_POSITION, t)
         return mav.MAV_RESULT_ACCEPTED, 0
 
     def _cmd_message_interval(self, p, sender, scomp, t):
-        msgid, interval_us = int(p[0]), p[1]
-        if msgid not in BUILDERS or msgid == mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+        if not self.telemetry.set_interval(int(p[0]), p[1], t):
             return mav.MAV_RESULT_DENIED, 0
-        if interval_us == -1:
-            self.intervals[msgid] = math.inf
-        elif interval_us == 0:
-            self.intervals[msgid] = DEFAULT_RATES.get(msgid, math.inf)
-        elif interval_us > 0:
-            self.intervals[msgid] = max(0.02, interval_us / 1e6)
-        else:
-            return mav.MAV_RESULT_DENIED, 0
-        self.due[msgid] = t
         return mav.MAV_RESULT_ACCEPTED, 0
 
     def _cmd_operator_control(self, p, sender, scomp, t):
@@ -330,7 +287,7 @@ class Endpoint:
         if error:
             self.statustext(f"set mission current: {error}", mav.MAV_SEVERITY_WARNING)
             return mav.MAV_RESULT_DENIED, 0
-        self._emit(mav.MAVLINK_MSG_ID_MISSION_CURRENT, t, on_request=True)
+        self.telemetry.emit(mav.MAVLINK_MSG_ID_MISSION_CURRENT, t)
         return mav.MAV_RESULT_ACCEPTED, 0
 
     # ----- teleop and modes as messages ---------------------------------------------------------------------
@@ -446,7 +403,7 @@ class Endpoint:
         error = self.vehicle.set_plan_start(m.seq, sender, scomp, t)
         if error:
             self.statustext(f"set mission current: {error}", mav.MAV_SEVERITY_WARNING)
-        self._emit(mav.MAVLINK_MSG_ID_MISSION_CURRENT, t, on_request=True)
+        self.telemetry.emit(mav.MAVLINK_MSG_ID_MISSION_CURRENT, t)
 
     # ----- parameters ---------------------------------------------------------------------------------------
     def _param_value(self, index: int) -> None:
@@ -490,12 +447,15 @@ class Endpoint:
         self._param_value(names.index(name))
 
     # ----- telemetry ----------------------------------------------------------------------------------------
+    def custom_mode(self) -> int:
+        return self.telemetry.custom_mode()
+
     def tick(self, t: float) -> list[bytes]:
         """Announce lease events, send due telemetry, and return every frame produced since the last tick."""
         self.t = t
         v = self.vehicle
         for ev in v.events:
-            self.mav.lease_event_send(self._boot_ms(ev.t), ev.epoch, _idx(ev.expired), _idx(ev.current),
+            self.mav.lease_event_send(self.telemetry.boot_ms(ev.t), ev.epoch, _idx(ev.expired), _idx(ev.current),
                                       int(ev.reason), int(ev.holder))
         v.events.clear()
         for text in v.notices:
@@ -508,177 +468,10 @@ class Endpoint:
         why = self.missions.tick(t)
         if why:
             self.statustext(why, mav.MAV_SEVERITY_WARNING)
-        if t >= self.next_heartbeat:
-            self.next_heartbeat = t + 1.0
-            self._heartbeat()
-        status_key = self._status_key()
-        if status_key != self.last_status_key:
-            self.last_status_key = status_key
-            self.due[mav.MAVLINK_MSG_ID_LEASE_STATUS] = t
-            self.due[mav.MAVLINK_MSG_ID_MISSION_CURRENT] = t
-        control_key = (v.book.owner, v.book.takeover_allowed)
-        if control_key != self.last_control_key:
-            self.last_control_key = control_key
-            self.due[mav.MAVLINK_MSG_ID_CONTROL_STATUS] = t
-        for msgid, interval in self.intervals.items():
-            due = self.due.get(msgid, self.boot_t)
-            if t + 1e-9 >= due:
-                # keep the average rate exact although ticks are coarser than the interval
-                nxt = due + interval
-                self.due[msgid] = nxt if nxt > t else t + interval
-                self._emit(msgid, t)
+        self.telemetry.tick(t)
         frames = self._sink.frames
         self._sink.frames = []
         return frames
-
-    def _status_key(self) -> tuple:
-        b = self.vehicle.book
-        cur = b.current
-        return (b.epoch, b.owner, cur.index if cur else None, cur.newest_sub if cur else None,
-                cur.claimed if cur else None, self.vehicle.state())
-
-    def _emit(self, msgid: int, t: float, on_request: bool = False) -> bool:
-        build = BUILDERS.get(msgid)
-        if build is None:
-            return False
-        build(self, t)
-        return True
-
-    def custom_mode(self) -> int:
-        state = self.vehicle.state()
-        if state == State.TELEOP and not self.vehicle.holding:
-            return PX4_POSCTL << 16
-        if state in (State.RETURNING,):
-            return (PX4_AUTO << 16) | (PX4_AUTO_RTL << 24)
-        if state == State.NAVIGATING:
-            return (PX4_AUTO << 16) | (PX4_AUTO_MISSION << 24)
-        return (PX4_AUTO << 16) | (PX4_AUTO_LOITER << 24)
-
-    def _heartbeat(self) -> None:
-        v = self.vehicle
-        base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
-        if v.armed:
-            base |= mav.MAV_MODE_FLAG_SAFETY_ARMED
-        state = v.state()
-        if state == State.TELEOP:
-            base |= mav.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
-        elif state in (State.RETURNING, State.NAVIGATING):
-            base |= mav.MAV_MODE_FLAG_AUTO_ENABLED
-        system_status = mav.MAV_STATE_ACTIVE if v.armed else mav.MAV_STATE_STANDBY
-        self.mav.heartbeat_send(v.driver.mav_type, mav.MAV_AUTOPILOT_GENERIC, base, self.custom_mode(),
-                                system_status)
-
-    def _sys_status(self, t: float) -> None:
-        v = self.vehicle
-        gps_ok = v.readings is not None and v.estimator.fixes_used > 0 and self._fix_age(t) < 3.0
-        present = HEALTH_SENSORS | mav.MAV_SYS_STATUS_SENSOR_GPS
-        health = HEALTH_SENSORS | (mav.MAV_SYS_STATUS_SENSOR_GPS if gps_ok else 0)
-        c = self.counters
-        drop = int(min(10000, 10000 * c.bad_frames / max(1, c.frames + c.bad_frames)))
-        self.mav.sys_status_send(present, present, health, 200, 24000, 1000, 90, drop, c.bad_frames, 0, 0, 0, 0)
-
-    def _fix_age(self, t: float) -> float:
-        last = self.vehicle.last_fix_t
-        return math.inf if last is None else t - last
-
-    def _position(self, t: float) -> None:
-        p = self.vehicle.estimator.pose
-        lat, lon = self.origin.to_global(p.x, p.y)
-        vx, vy = self._velocity()
-        hdg = int(math.degrees(p.yaw) % 360 * 100)
-        self.mav.global_position_int_send(self._boot_ms(t), int(lat * 1e7), int(lon * 1e7),
-                                          int(self.origin.alt * 1000), 0, int(vx * 100), int(vy * 100), 0, hdg)
-
-    def _velocity(self) -> tuple[float, float]:
-        v = self.vehicle
-        speed = v.readings.speed if v.readings else 0.0
-        yaw = v.estimator.pose.yaw
-        return speed * math.cos(yaw), speed * math.sin(yaw)
-
-    def _local_position(self, t: float) -> None:
-        p = self.vehicle.estimator.pose
-        vx, vy = self._velocity()
-        self.mav.local_position_ned_send(self._boot_ms(t), p.x, p.y, 0.0, vx, vy, 0.0)
-
-    def _attitude(self, t: float) -> None:
-        v = self.vehicle
-        rate = v.readings.yaw_rate if v.readings else 0.0
-        self.mav.attitude_send(self._boot_ms(t), 0.0, 0.0, v.estimator.pose.yaw, 0.0, 0.0, rate)
-
-    def _gps_raw(self, t: float) -> None:
-        v = self.vehicle
-        fix = v.readings.fix if v.readings else None
-        last = v.last_fix
-        fresh = last is not None and self._fix_age(t) < 3.0
-        lat, lon = self.origin.to_global(*(last if fresh else (0.0, 0.0)))
-        eph = int(min(65535, (fix.std if fix else 0.7) * 100)) if fresh else 65535
-        self.mav.gps_raw_int_send(int(t * 1e6), 3 if fresh else 1, int(lat * 1e7) if fresh else 0,
-                                  int(lon * 1e7) if fresh else 0, int(self.origin.alt * 1000) if fresh else 0,
-                                  eph, 65535, 65535, 65535, 10 if fresh else 0)
-
-    def _extended_sys_state(self, t: float) -> None:
-        self.mav.extended_sys_state_send(mav.MAV_VTOL_STATE_UNDEFINED, mav.MAV_LANDED_STATE_ON_GROUND)
-
-    def _home(self, t: float) -> None:
-        hx, hy = self.vehicle.home
-        lat, lon = self.origin.to_global(hx, hy)
-        self.mav.home_position_send(int(lat * 1e7), int(lon * 1e7), int(self.origin.alt * 1000), hx, hy, 0.0,
-                                    [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(t * 1e6))
-
-    def _autopilot_version(self, t: float) -> None:
-        self.mav.autopilot_version_send(CAPABILITIES, 0x00010000 | 0xFF, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0,
-                                        self.sysid)
-
-    def _mission_current(self, t: float) -> None:
-        v = self.vehicle
-        total = len(self.missions.lists[0])
-        st = v.service
-        seq = st.items[st.item].seq if st is not None and 0 <= st.item < len(st.items) else 0
-        state = mav.MISSION_STATE_ACTIVE if v.state() in (State.RETURNING, State.HOLDING, State.NAVIGATING) \
-            else (mav.MISSION_STATE_NOT_STARTED if total else mav.MISSION_STATE_NO_MISSION)
-        self.mav.mission_current_send(max(0, seq), total, state)
-
-    def _control_status(self, t: float) -> None:
-        b = self.vehicle.book
-        flags = mav.GCS_CONTROL_STATUS_FLAGS_SYSTEM_MANAGER
-        if b.takeover_allowed:
-            flags |= mav.GCS_CONTROL_STATUS_FLAGS_TAKEOVER_ALLOWED
-        self.mav.control_status_send(flags, b.owner or 0, [0] * 10)
-
-    def _lease_status(self, t: float) -> None:
-        v = self.vehicle
-        b = v.book
-        cur = b.current
-        age = b.link.age(t)
-        st = v.service
-        nan = math.nan
-        start = st.start if st is not None else (nan, nan)
-        target = st.route.target if st is not None and st.route is not None and st.route.target else (nan, nan)
-        remaining = v.route_remaining()
-        self.mav.lease_status_send(
-            self._boot_ms(t), b.epoch or 0, b.owner or 0, b.owner_compid if b.owner else 0,
-            _idx(cur.index if cur else None), cur.newest_sub[0] if cur and cur.newest_sub else NO_INDEX,
-            int(cur.holder) if cur else int(Holder.NONE), int(cur.claimed) if cur else 0, len(b.scheduled),
-            v.state(), int(b.last_reason),
-            0xFFFFFFFF if age is None else int(min(age, 4e6) * 1000), start[0], start[1], target[0], target[1],
-            v.displacement(), st.max_displacement if st is not None and math.isfinite(st.max_displacement) else nan,
-            remaining, min(65535, v.trail.count))
-
-
-BUILDERS: dict[int, Callable[[Endpoint, float], None]] = {
-    mav.MAVLINK_MSG_ID_SYS_STATUS: Endpoint._sys_status,
-    mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: Endpoint._extended_sys_state,
-    mav.MAVLINK_MSG_ID_GPS_RAW_INT: Endpoint._gps_raw,
-    mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: Endpoint._position,
-    mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: Endpoint._local_position,
-    mav.MAVLINK_MSG_ID_ATTITUDE: Endpoint._attitude,
-    mav.MAVLINK_MSG_ID_HOME_POSITION: Endpoint._home,
-    mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION: Endpoint._autopilot_version,
-    mav.MAVLINK_MSG_ID_MISSION_CURRENT: Endpoint._mission_current,
-    mav.MAVLINK_MSG_ID_CONTROL_STATUS: Endpoint._control_status,
-    mav.MAVLINK_MSG_ID_LEASE_STATUS: Endpoint._lease_status,
-    mav.MAVLINK_MSG_ID_HEARTBEAT: lambda ep, t: ep._heartbeat(),
-}
 
 COMMANDS: dict[int, Callable[..., tuple[int, int]]] = {
     mav.MAV_CMD_COMPONENT_ARM_DISARM: Endpoint._cmd_arm,
@@ -695,27 +488,6 @@ COMMANDS: dict[int, Callable[..., tuple[int, int]]] = {
     mav.MAV_CMD_LEASE_EXPIRE: Endpoint._cmd_lease_expire,
     mav.MAV_CMD_DO_SET_MISSION_CURRENT: Endpoint._cmd_mission_current,
 }
-
-
-def decode_mode(base: int, custom: int, sub: int) -> str | None:
-    """DO_SET_MODE in the PX4 encoding (main/sub) or the ArduPilot Rover numbering -> HOLD / RTL / MANUAL."""
-    if not base & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-        return None
-    if custom == PX4_AUTO:
-        if sub in (PX4_AUTO_RTL, PX4_AUTO_MISSION):
-            return "RTL"
-        if sub in (PX4_AUTO_LOITER, 0):
-            return "HOLD"  # PX4 AUTO/LOITER, or ArduPilot Rover HOLD (4 with sub 0)
-        return None
-    if custom in (PX4_MANUAL, PX4_POSCTL, AP_MANUAL, AP_STEERING):
-        return "MANUAL"
-    if custom in (AP_RTL, AP_SMART_RTL, AP_AUTO):
-        return "RTL"
-    return None
-
-
-def _idx(i: int | None) -> int:
-    return NO_INDEX if i is None else i
 
 
 def _whole(x: float) -> int | None:
@@ -738,4 +510,7 @@ def _param_name(raw) -> str:
     return raw.split("\x00", 1)[0]
 
 
-__all__ = ["Endpoint", "decode_mode", "ExpireReason"]
+
+
+def _idx(i: int | None) -> int:
+    return NO_INDEX if i is None else i

@@ -1,0 +1,247 @@
+"""What the vehicle reports and when (DESIGN §4 telemetry): the heartbeat, position and attitude, health, home,
+mission progress, operator control and lease status, each at its own rate, some also on change.
+
+Positions come from the estimator, never from ground truth, because that is all a real vehicle knows.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+from link import dialect
+from vehicle.app import State, Vehicle
+from vehicle.lease import Holder
+from vehicle.missions import Origin
+from vehicle.modes import custom_mode
+
+mav = dialect.load()
+
+NO_INDEX = 65535
+HEALTH_SENSORS = (mav.MAV_SYS_STATUS_SENSOR_3D_GYRO | mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+                  | mav.MAV_SYS_STATUS_SENSOR_3D_MAG | mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+                  | mav.MAV_SYS_STATUS_PREARM_CHECK)
+CAPABILITIES = (mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+                | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+                | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mav.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
+                | mav.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
+                | mav.MAV_PROTOCOL_CAPABILITY_COMPONENT_ACCEPTS_GCS_CONTROL)
+
+# default telemetry intervals, s (changed with SET_MESSAGE_INTERVAL)
+DEFAULT_RATES = {
+    mav.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
+    mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
+    mav.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0,
+    mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 0.25,
+    mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 0.25,
+    mav.MAVLINK_MSG_ID_ATTITUDE: 0.25,
+    mav.MAVLINK_MSG_ID_HOME_POSITION: 5.0,
+    mav.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
+    mav.MAVLINK_MSG_ID_CONTROL_STATUS: 1.0,
+    mav.MAVLINK_MSG_ID_LEASE_STATUS: 0.5,
+}
+
+
+class Telemetry:
+    """Scheduled and on-change reports through one encoder (``enc``: a pymavlink MAVLink instance)."""
+
+    def __init__(self, enc, vehicle: Vehicle, origin: Origin, boot_t: float, link_stats: Callable[[], tuple[int, int]],
+                 mission_count: Callable[[], int]) -> None:
+        self.mav = enc
+        self.vehicle = vehicle
+        self.origin = origin
+        self.boot_t = boot_t
+        self.link_stats = link_stats  # (frames received, bad frames) for SYS_STATUS
+        self.mission_count = mission_count
+        self.intervals = dict(DEFAULT_RATES)
+        self.due: dict[int, float] = {}
+        self.next_heartbeat = boot_t
+        self.last_status_key: tuple | None = None
+        self.last_control_key: tuple | None = None
+
+    def boot_ms(self, t: float) -> int:
+        return int(max(0.0, t - self.boot_t) * 1000) & 0xFFFFFFFF
+
+    def set_interval(self, msgid: int, interval_us: float, t: float) -> bool:
+        """SET_MESSAGE_INTERVAL: -1 off, 0 default, else microseconds. False for what is not telemetry here."""
+        if msgid not in BUILDERS or msgid == mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+            return False
+        if interval_us == -1:
+            self.intervals[msgid] = math.inf
+        elif interval_us == 0:
+            self.intervals[msgid] = DEFAULT_RATES.get(msgid, math.inf)
+        elif interval_us > 0:
+            self.intervals[msgid] = max(0.02, interval_us / 1e6)
+        else:
+            return False
+        self.due[msgid] = t
+        return True
+
+    def tick(self, t: float) -> None:
+        v = self.vehicle
+        if t >= self.next_heartbeat:
+            self.next_heartbeat = t + 1.0
+            self._heartbeat(t)
+        status_key = self._status_key()
+        if status_key != self.last_status_key:
+            self.last_status_key = status_key
+            self.due[mav.MAVLINK_MSG_ID_LEASE_STATUS] = t
+            self.due[mav.MAVLINK_MSG_ID_MISSION_CURRENT] = t
+        control_key = (v.book.owner, v.book.takeover_allowed)
+        if control_key != self.last_control_key:
+            self.last_control_key = control_key
+            self.due[mav.MAVLINK_MSG_ID_CONTROL_STATUS] = t
+        for msgid, interval in self.intervals.items():
+            due = self.due.get(msgid, self.boot_t)
+            if t + 1e-9 >= due:
+                # keep the average rate exact although ticks are coarser than the interval
+                nxt = due + interval
+                self.due[msgid] = nxt if nxt > t else t + interval
+                self.emit(msgid, t)
+
+    def _status_key(self) -> tuple:
+        b = self.vehicle.book
+        cur = b.current
+        return (b.epoch, b.owner, cur.index if cur else None, cur.newest_sub if cur else None,
+                cur.claimed if cur else None, self.vehicle.state())
+
+    def emit(self, msgid: int, t: float) -> bool:
+        build = BUILDERS.get(msgid)
+        if build is None:
+            return False
+        build(self, t)
+        return True
+
+    def custom_mode(self) -> int:
+        return custom_mode(self.vehicle.state(), self.vehicle.holding)
+
+    def _heartbeat(self, t: float) -> None:
+        v = self.vehicle
+        base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        if v.armed:
+            base |= mav.MAV_MODE_FLAG_SAFETY_ARMED
+        state = v.state()
+        if state == State.TELEOP:
+            base |= mav.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+        elif state in (State.RETURNING, State.NAVIGATING):
+            base |= mav.MAV_MODE_FLAG_AUTO_ENABLED
+        system_status = mav.MAV_STATE_ACTIVE if v.armed else mav.MAV_STATE_STANDBY
+        self.mav.heartbeat_send(v.driver.mav_type, mav.MAV_AUTOPILOT_GENERIC, base, self.custom_mode(),
+                                system_status)
+
+    def _sys_status(self, t: float) -> None:
+        v = self.vehicle
+        gps_ok = v.readings is not None and v.estimator.fixes_used > 0 and self._fix_age(t) < 3.0
+        present = HEALTH_SENSORS | mav.MAV_SYS_STATUS_SENSOR_GPS
+        health = HEALTH_SENSORS | (mav.MAV_SYS_STATUS_SENSOR_GPS if gps_ok else 0)
+        frames, bad = self.link_stats()
+        drop = int(min(10000, 10000 * bad / max(1, frames + bad)))
+        self.mav.sys_status_send(present, present, health, 200, 24000, 1000, 90, drop, min(bad, 65535), 0, 0, 0, 0)
+
+    def _fix_age(self, t: float) -> float:
+        last = self.vehicle.last_fix_t
+        return math.inf if last is None else t - last
+
+    def _position(self, t: float) -> None:
+        p = self.vehicle.estimator.pose
+        lat, lon = self.origin.to_global(p.x, p.y)
+        vx, vy = self._velocity()
+        hdg = int(math.degrees(p.yaw) % 360 * 100)
+        self.mav.global_position_int_send(self.boot_ms(t), int(lat * 1e7), int(lon * 1e7),
+                                          int(self.origin.alt * 1000), 0, int(vx * 100), int(vy * 100), 0, hdg)
+
+    def _velocity(self) -> tuple[float, float]:
+        v = self.vehicle
+        speed = v.readings.speed if v.readings else 0.0
+        yaw = v.estimator.pose.yaw
+        return speed * math.cos(yaw), speed * math.sin(yaw)
+
+    def _local_position(self, t: float) -> None:
+        p = self.vehicle.estimator.pose
+        vx, vy = self._velocity()
+        self.mav.local_position_ned_send(self.boot_ms(t), p.x, p.y, 0.0, vx, vy, 0.0)
+
+    def _attitude(self, t: float) -> None:
+        v = self.vehicle
+        rate = v.readings.yaw_rate if v.readings else 0.0
+        self.mav.attitude_send(self.boot_ms(t), 0.0, 0.0, v.estimator.pose.yaw, 0.0, 0.0, rate)
+
+    def _gps_raw(self, t: float) -> None:
+        v = self.vehicle
+        fix = v.readings.fix if v.readings else None
+        last = v.last_fix
+        fresh = last is not None and self._fix_age(t) < 3.0
+        lat, lon = self.origin.to_global(*(last if fresh else (0.0, 0.0)))
+        eph = int(min(65535, (fix.std if fix else 0.7) * 100)) if fresh else 65535
+        self.mav.gps_raw_int_send(int(t * 1e6), 3 if fresh else 1, int(lat * 1e7) if fresh else 0,
+                                  int(lon * 1e7) if fresh else 0, int(self.origin.alt * 1000) if fresh else 0,
+                                  eph, 65535, 65535, 65535, 10 if fresh else 0)
+
+    def _extended_sys_state(self, t: float) -> None:
+        self.mav.extended_sys_state_send(mav.MAV_VTOL_STATE_UNDEFINED, mav.MAV_LANDED_STATE_ON_GROUND)
+
+    def _home(self, t: float) -> None:
+        hx, hy = self.vehicle.home
+        lat, lon = self.origin.to_global(hx, hy)
+        self.mav.home_position_send(int(lat * 1e7), int(lon * 1e7), int(self.origin.alt * 1000), hx, hy, 0.0,
+                                    [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(t * 1e6))
+
+    def _autopilot_version(self, t: float) -> None:
+        self.mav.autopilot_version_send(CAPABILITIES, 0x00010000 | 0xFF, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0,
+                                        self.mav.srcSystem)
+
+    def _mission_current(self, t: float) -> None:
+        v = self.vehicle
+        total = self.mission_count()
+        st = v.service
+        seq = st.items[st.item].seq if st is not None and 0 <= st.item < len(st.items) else 0
+        state = mav.MISSION_STATE_ACTIVE if v.state() in (State.RETURNING, State.HOLDING, State.NAVIGATING) \
+            else (mav.MISSION_STATE_NOT_STARTED if total else mav.MISSION_STATE_NO_MISSION)
+        self.mav.mission_current_send(max(0, seq), total, state)
+
+    def _control_status(self, t: float) -> None:
+        b = self.vehicle.book
+        flags = mav.GCS_CONTROL_STATUS_FLAGS_SYSTEM_MANAGER
+        if b.takeover_allowed:
+            flags |= mav.GCS_CONTROL_STATUS_FLAGS_TAKEOVER_ALLOWED
+        self.mav.control_status_send(flags, b.owner or 0, [0] * 10)
+
+    def _lease_status(self, t: float) -> None:
+        v = self.vehicle
+        b = v.book
+        cur = b.current
+        age = b.link.age(t)
+        st = v.service
+        nan = math.nan
+        start = st.start if st is not None else (nan, nan)
+        target = st.route.target if st is not None and st.route is not None and st.route.target else (nan, nan)
+        remaining = v.route_remaining()
+        self.mav.lease_status_send(
+            self.boot_ms(t), b.epoch or 0, b.owner or 0, b.owner_compid if b.owner else 0,
+            _idx(cur.index if cur else None), cur.newest_sub[0] if cur and cur.newest_sub else NO_INDEX,
+            int(cur.holder) if cur else int(Holder.NONE), int(cur.claimed) if cur else 0, len(b.scheduled),
+            v.state(), int(b.last_reason),
+            0xFFFFFFFF if age is None else int(min(age, 4e6) * 1000), start[0], start[1], target[0], target[1],
+            v.displacement(), st.max_displacement if st is not None and math.isfinite(st.max_displacement) else nan,
+            remaining, min(65535, v.trail.count))
+
+
+BUILDERS: dict[int, Callable[[Telemetry, float], None]] = {
+    mav.MAVLINK_MSG_ID_SYS_STATUS: Telemetry._sys_status,
+    mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: Telemetry._extended_sys_state,
+    mav.MAVLINK_MSG_ID_GPS_RAW_INT: Telemetry._gps_raw,
+    mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: Telemetry._position,
+    mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: Telemetry._local_position,
+    mav.MAVLINK_MSG_ID_ATTITUDE: Telemetry._attitude,
+    mav.MAVLINK_MSG_ID_HOME_POSITION: Telemetry._home,
+    mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION: Telemetry._autopilot_version,
+    mav.MAVLINK_MSG_ID_MISSION_CURRENT: Telemetry._mission_current,
+    mav.MAVLINK_MSG_ID_CONTROL_STATUS: Telemetry._control_status,
+    mav.MAVLINK_MSG_ID_LEASE_STATUS: Telemetry._lease_status,
+    mav.MAVLINK_MSG_ID_HEARTBEAT: Telemetry._heartbeat,
+}
+
+
+
+def _idx(i: int | None) -> int:
+    return NO_INDEX if i is None else i
