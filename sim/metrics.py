@@ -72,7 +72,8 @@ def compute(run: Run) -> dict:
         "reaction_latency_s": _r(reaction, 4), "link_regained_s": _r(regained),
         "distance_back_m": _r(distance_back, 2), "max_displacement_m": _r(max_disp, 2),
         "final_target_error_m": _r(final_err, 2), "collisions": run.world.collisions,
-        "stale_commands_executed": v.stale_commands_executed, "commands_rejected": v.commands_rejected,
+        "stale_commands_executed": v.stale_commands_executed + run.audit_stale,
+        "commands_rejected": v.commands_rejected,
         "estimator_rmse_m": _r(rmse), "trail_points": v.trail.count, "trail_max_deviation_m": _r(deviation),
         "real_time_factor": _r(run.t / run.wall if run.wall > 0 else None, 1), "lease_events": events,
     }

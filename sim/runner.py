@@ -118,6 +118,8 @@ class Run:
         self.next_radio_status = 0.0
         self.link_backs: list[tuple[float, float | None]] = []  # (link regained, start of the contact run)
         self.regains: list[tuple[float, float | None]] = []  # (LINK_REGAINED time, start of the contact run)
+        self.audit_stale = 0  # actuations the runner's own audit found outside the announced current lease
+        self.announced: tuple[int, int | None] | None = None  # (epoch, current index) from LEASE_EVENTs
         self.losses: list[tuple[float, float | None]] = []  # (COMMS_LOST time, owner last heard before it)
 
     # ----- the loop ------------------------------------------------------------------------------------------
@@ -162,6 +164,7 @@ class Run:
         if was_lost and not v.book.link.lost and v.book.owner is not None:
             self.link_backs.append((t, v.book.link.contact_since))
         for e in v.event_log[n_events:]:
+            self.announced = (e.epoch, e.current)
             if e.reason.name == "COMMS_LOST":
                 self.losses.append((e.t, heard))
             elif e.reason.name == "LINK_REGAINED":
@@ -258,6 +261,7 @@ class Run:
         tr.heard.append(v.link_good(t))
         tr.owner.append(v.book.owner or 0)
         tr.cmd.append(v.command_out)
+        self._audit(v)
         returning = cur is not None and cur.holder is Holder.RETURN_SERVICE
         blk = self.blocks[-1] if self.blocks and self.blocks[-1].ended is None else None
         if blk is not None and (not returning or cur.index != blk.index):
@@ -281,6 +285,15 @@ class Run:
                 if blk.target is None:
                     blk.target = st.route.target
                     blk.max_disp_allowed = st.max_displacement
+
+    def _audit(self, v) -> None:
+        """An independent check of the stale-command guard: a teleop setpoint that moved the robot this tick must
+        carry the lease the vehicle last announced as current (LEASE_EVENT) and come from the owner."""
+        sp = v.setpoint
+        if sp is None or v.command_out == (0.0, 0.0) or self.announced is None:
+            return
+        if (sp.lease.epoch, sp.lease.path[0]) != self.announced or sp.sender != v.book.owner:
+            self.audit_stale += 1
 
     def _close_block(self) -> None:
         if not self.blocks or self.blocks[-1].ended is not None:

@@ -231,3 +231,36 @@ def test_parameters_are_saved_back_to_the_parm_file(tmp_path):
     pair.gs.param_set("RTL_MAX_DISP", -1.0)  # refused: the file keeps the good value
     pair.step(0.1)
     assert load_defaults(parm)["RTL_MAX_DISP"] == 75.0
+
+
+def test_stale_guards_catch_a_setpoint_that_slipped_past_the_lease_check(monkeypatch):
+    """Both last lines of defence, tested by breaking the first: the actuator guard in the vehicle and the
+    simulator's independent audit each count (and the guard stops) a setpoint from an expired lease."""
+    from types import SimpleNamespace
+
+    from sim.runner import Run
+    from sim.scenario import load
+    from vehicle.app import Setpoint
+    from vehicle.lease import Check, LeaseBook, LeaseId, Verdict
+
+    pair = acquired(Pair())
+    v = pair.vehicle
+    old = v.book.current_id
+    e = pair.gs.expire()
+    pair.until(lambda: e.done, 2, "ACK")
+    c = pair.gs.claim(0)  # a newer operator lease: [E,0] is now stale
+    pair.until(lambda: c.done, 2, "ACK")
+    monkeypatch.setattr(LeaseBook, "check", lambda self, sender, claim=None: Check(Verdict.EXECUTE, claim))
+    v.setpoint = Setpoint(1.0, 0.0, old, pair.t + 5, 255)
+    pair.step(0.1)
+    assert v.stale_commands_executed == 1 and v.setpoint is None and v.command_out == (0.0, 0.0)
+
+    run = Run(load("open"))
+    run.announced = (old.epoch, old.index + 5)
+    fake = SimpleNamespace(setpoint=Setpoint(1.0, 0.0, LeaseId(old.epoch, (old.index,)), 9.0, 255),
+                           command_out=(1.0, 0.0), book=SimpleNamespace(owner=255))
+    run._audit(fake)
+    assert run.audit_stale == 1
+    fake.setpoint = Setpoint(1.0, 0.0, LeaseId(old.epoch, (old.index + 5,)), 9.0, 200)  # right lease, wrong sender
+    run._audit(fake)
+    assert run.audit_stale == 2

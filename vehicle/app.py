@@ -93,6 +93,7 @@ class Setpoint:
     yaw_rate: float
     lease: LeaseId
     until: float
+    sender: int = 0
 
 
 def lease_config(params: Params) -> LeaseConfig:
@@ -239,7 +240,7 @@ class Vehicle:
         kind = payload[0]
         if kind == "teleop" and lease is not None:
             _, speed, yaw_rate = payload
-            self.setpoint = Setpoint(speed, yaw_rate, lease, self.t + SETPOINT_TTL)
+            self.setpoint = Setpoint(speed, yaw_rate, lease, self.t + SETPOINT_TTL, sender)
             if speed or yaw_rate:
                 self.holding = False
         elif kind == "hold":
@@ -422,7 +423,10 @@ class Vehicle:
             self.dropped_commands += 1
             return 0.0, 0.0
         if self.book.current_id is None or sp.lease.path[0] != self.book.current_id.path[0]:
-            self.stale_commands_executed += 1  # unreachable by construction; counted if it ever happens
+            # a last guard at the actuator, independent of how the setpoint got here: never drive on it
+            self.stale_commands_executed += 1
+            self.setpoint = None
+            return 0.0, 0.0
         if abs(sp.speed) > 0.2 and self.readings is not None:
             self.outbound_speed += 0.02 * (abs(self.readings.speed) - self.outbound_speed)
         return sp.speed, sp.yaw_rate
