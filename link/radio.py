@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+MOTION_GRAIN = 0.05  # m
+
 
 @dataclass(frozen=True)
 class RadioParams:
@@ -76,11 +78,12 @@ class Radio:
         return self.p.shadowing_db * 1.4 * (top * (1 - sv) + bottom * sv)
 
     def link(self, antenna: tuple[float, float], power_dbm: float, robot: tuple[float, float]) -> LinkState:
-        """Channel state between an antenna and the robot; call once per control tick. A robot standing still
-        (within a centimetre) has the same channel, so the wall queries are not repeated."""
+        """Channel state between an antenna and the robot; call once per control tick. The channel is evaluated
+        on a 5 cm grain of the robot's motion (shadowing decorrelates over metres), so a robot standing still or
+        creeping does not repeat the wall queries every tick."""
         key = (antenna, power_dbm)
         hit = self._last.get(key)
-        if hit is not None and abs(hit[0][0] - robot[0]) < 0.01 and abs(hit[0][1] - robot[1]) < 0.01:
+        if hit is not None and abs(hit[0][0] - robot[0]) < MOTION_GRAIN and abs(hit[0][1] - robot[1]) < MOTION_GRAIN:
             return hit[1]
         state = self._link(antenna, power_dbm, robot)
         self._last[key] = ((robot[0], robot[1]), state)

@@ -55,6 +55,7 @@ class Telemetry:
         self.mission_count = mission_count
         self.intervals = dict(DEFAULT_RATES)
         self.due: dict[int, float] = {}
+        self.next_due = boot_t  # earliest of ``due``: most ticks have nothing scheduled
         self.next_heartbeat = boot_t
         self.last_status_key: tuple | None = None
         self.last_control_key: tuple | None = None
@@ -75,6 +76,7 @@ class Telemetry:
         else:
             return False
         self.due[msgid] = t
+        self.next_due = min(self.next_due, t)
         return True
 
     def tick(self, t: float) -> None:
@@ -87,10 +89,14 @@ class Telemetry:
             self.last_status_key = status_key
             self.due[mav.MAVLINK_MSG_ID_LEASE_STATUS] = t
             self.due[mav.MAVLINK_MSG_ID_MISSION_CURRENT] = t
+            self.next_due = t
         control_key = (v.book.owner, v.book.takeover_allowed)
         if control_key != self.last_control_key:
             self.last_control_key = control_key
             self.due[mav.MAVLINK_MSG_ID_CONTROL_STATUS] = t
+            self.next_due = t
+        if t + 1e-9 < self.next_due:
+            return
         for msgid, interval in self.intervals.items():
             due = self.due.get(msgid, self.boot_t)
             if t + 1e-9 >= due:
@@ -98,6 +104,7 @@ class Telemetry:
                 nxt = due + interval
                 self.due[msgid] = nxt if nxt > t else t + interval
                 self.emit(msgid, t)
+        self.next_due = min(self.due.get(m, self.boot_t) for m in self.intervals)
 
     def _status_key(self) -> tuple:
         b = self.vehicle.book
