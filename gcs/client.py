@@ -106,9 +106,6 @@ class Client:
         texts = [x for _, x in self.gs.texts[-5:] if "refused" in x or "not" in x]
         return texts[-1] if texts else ""
 
-    def _fresh_status(self) -> None:
-        self.pump(0.6)
-
     def acquire(self, allow_takeover: bool = False) -> int:
         p = self.call(self.gs.acquire(allow_takeover), what="operator control request")
         self.wait_for(lambda: self.gs.vehicle.status is not None and self.gs.vehicle.status.epoch == p.param2,

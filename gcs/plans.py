@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from vehicle.missions import GLOBAL_FRAMES, LOCAL_FRAMES, MISSION_FRAME, Item, Origin
+from vehicle.missions import MISSION_FRAME, Item, Origin, position_scale
 from vehicle.service import LEASE_BOUNDARY, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_RETURN_TO_LINK, NAV_WAYPOINT
 
 WPL_HEADER = "QGC WPL 110"
@@ -68,7 +68,7 @@ def read_wpl(text: str, source: str = "<plan>") -> list[Item]:
             raise PlanError(f"{source}:{n}: {e}") from None
         if seq != len(items):
             raise PlanError(f"{source}:{n}: item {seq} out of sequence (expected {len(items)})")
-        scale = 1e7 if frame in GLOBAL_FRAMES else (1e4 if frame in LOCAL_FRAMES else 1.0)
+        scale = position_scale(frame)
         if not (math.isfinite(x) and math.isfinite(y)):
             raise PlanError(f"{source}:{n}: position is not a number")
         items.append(Item(seq, frame, cmd, cur, auto, p1, p2, p3, p4, round(x * scale), round(y * scale), z, 0))
@@ -78,7 +78,7 @@ def read_wpl(text: str, source: str = "<plan>") -> list[Item]:
 def write_wpl(items: list[Item]) -> str:
     out = [WPL_HEADER]
     for it in items:
-        scale = 1e7 if it.frame in GLOBAL_FRAMES else (1e4 if it.frame in LOCAL_FRAMES else 1.0)
+        scale = position_scale(it.frame)
         out.append("\t".join(str(v) for v in (
             it.seq, it.current, it.frame, it.command, f"{it.param1:g}", f"{it.param2:g}", f"{it.param3:g}",
             f"{it.param4:g}", f"{it.x / scale:.8f}", f"{it.y / scale:.8f}", f"{it.z:g}", it.autocontinue)))

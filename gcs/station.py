@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from link import dialect
-from vehicle.missions import Item
+from vehicle.missions import Item, item_from_message
 
 mav = dialect.load()
 
@@ -144,7 +144,6 @@ class GroundStation:
         self.next_heartbeat = 0.0
         self.teleop: tuple[str, float, float, float] | None = None  # (kind, a, b, c) streamed at 10 Hz
         self.next_teleop = 0.0
-        self.heartbeats = True
         self.listeners: list[Callable[[object, float], None]] = []
         self.t = 0.0
 
@@ -166,7 +165,7 @@ class GroundStation:
 
     def tick(self, t: float) -> list[bytes]:
         self.t = t
-        if self.heartbeats and t >= self.next_heartbeat:
+        if t >= self.next_heartbeat:
             self.next_heartbeat = t + 1.0
             self.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, mav.MAV_STATE_ACTIVE)
         for p in self.pending.values():
@@ -259,9 +258,7 @@ class GroundStation:
 
     # ----- missions ------------------------------------------------------------------------------------------
     def upload(self, items: list[Item], mission_type: int = 0) -> Transfer:
-        items = [Item(k, *(getattr(it, f) for f in ("frame", "command", "current", "autocontinue", "param1",
-                                                     "param2", "param3", "param4", "x", "y", "z")), mission_type)
-                 for k, it in enumerate(items)]
+        items = [replace(it, seq=k, mission_type=mission_type) for k, it in enumerate(items)]
         self.transfer = Transfer("upload", mission_type, items, len(items), self.t)
         self.mav.mission_count_send(self.target, self.target_comp, len(items), mission_type)
         return self.transfer
@@ -409,8 +406,7 @@ class GroundStation:
         tr = self.transfer
         if tr is None or tr.kind != "download" or tr.done or m.seq != len(tr.items):
             return
-        tr.items.append(Item(m.seq, m.frame, m.command, m.current, m.autocontinue, m.param1, m.param2, m.param3,
-                             m.param4, m.x, m.y, m.z, m.mission_type))
+        tr.items.append(item_from_message(m))
         tr.last_at, tr.tries = t, 1
         if len(tr.items) == tr.count:
             tr.done, tr.result = True, 0

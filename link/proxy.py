@@ -19,6 +19,18 @@ from link.transports import UdpTransport
 RADIO_SYSID, RADIO_COMPID = 51, 68  # what SiK telemetry radios use for their RADIO_STATUS
 
 
+class RadioReport:
+    """RADIO_STATUS frames as the ground-side telemetry radio sends them (rssi/remrssi, noise/remnoise)."""
+
+    def __init__(self) -> None:
+        self._mav = dialect.load().MAVLink(None, RADIO_SYSID, RADIO_COMPID)
+
+    def frame(self, state: LinkState, jammed: bool = False, lost: int = 0) -> bytes:
+        rssi = 0 if jammed else rssi_to_radio_status(state.rssi_dbm)
+        noise = rssi_to_radio_status(state.noise_dbm)
+        return self._mav.radio_status_encode(rssi, rssi, 100, noise, noise, 0, lost % 65536).pack(self._mav)
+
+
 class RadioProxy:
     def __init__(self, transport: UdpTransport, radio: Radio | None, antenna: tuple[float, float],
                  power_dbm: float, robot: Callable[[], tuple[float, float]]) -> None:
@@ -29,8 +41,7 @@ class RadioProxy:
         self._up: list[tuple[float, int, bytes]] = []  # to the vehicle
         self._down: list[tuple[float, int, bytes]] = []  # to the ground stations
         self._seq = itertools.count()
-        mav = dialect.load()
-        self._mav = mav.MAVLink(None, RADIO_SYSID, RADIO_COMPID)
+        self._report = RadioReport()
         self._next_status = 0.0
         self.lost = 0
 
@@ -70,7 +81,4 @@ class RadioProxy:
             self.transport.send(heapq.heappop(self._down)[2])
         if self.state is not None and t >= self._next_status:
             self._next_status = t + 1.0
-            rssi = rssi_to_radio_status(self.state.rssi_dbm)
-            noise = rssi_to_radio_status(self.state.noise_dbm)
-            msg = self._mav.radio_status_encode(rssi, rssi, 100, noise, noise, 0, self.lost % 65536)
-            self.transport.send(msg.pack(self._mav))
+            self.transport.send(self._report.frame(self.state, lost=self.lost))

@@ -6,13 +6,18 @@ physics between ticks with ``advance``.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from sim.robots import Robot, make_robot
 from sim.scenario import Scenario
 from sim.sensors import Sensors
 from sim.world import World
+from vehicle.app import Vehicle
 from vehicle.io import Readings
+from vehicle.mavlink import Endpoint
+from vehicle.params import load_defaults
 
 
 class SimDriver:
@@ -38,3 +43,15 @@ class SimDriver:
     @property
     def pose(self) -> tuple[float, float, float]:
         return self.robot.pose
+
+
+def simulated_vehicle(scenario: Scenario, kind: str, seed: int,
+                      param_file: Path | None = None) -> tuple[SimDriver, Vehicle, Endpoint]:
+    """The scenario's robot with the real onboard software on it: boot parameters from ``param_file`` (or the
+    defaults), then the scenario's own, as `sim run` and `sim serve` both start it."""
+    driver = SimDriver(scenario, kind, np.random.default_rng(seed))
+    params = load_defaults(param_file) if param_file is not None and param_file.is_file() else load_defaults()
+    for k, v in scenario.params.items():
+        params.set(k, v)
+    vehicle = Vehicle(driver, params, scenario.start, 0.0, seed=seed)
+    return driver, vehicle, Endpoint(vehicle, param_file=param_file)

@@ -71,10 +71,10 @@ class Operator:
             return
         if self.phase == "arming":
             if self.pending and self.pending.done:
-                self.phase = "driving" if self.pending.ok else "arming-retry"
-                if not self.pending.ok:
+                if self.pending.ok:
+                    self.phase = "driving"
+                else:
                     self.pending = gs.arm(True)
-                    self.phase = "arming"
             return
         if st is None:
             return
@@ -86,18 +86,19 @@ class Operator:
                 if self.phase == "driving" and not self.leg.done:
                     self.phase = "resuming"
             return
-        if st.state != mav.RETURNLINK_STATE_TELEOP or st.owner != gs.sysid or not fresh:
-            gs.stop_streaming() if not fresh else gs.stop()
+        if not fresh:
+            gs.stop_streaming()  # the picture froze: stop pushing the stick
             return
-        if self.phase == "driving" and not self.leg.done:
-            self._drive(self.leg)
-        elif self.phase in ("driving", "resuming") and self.leg.done and not self.resume.done and self.claims:
-            self.phase = "resuming"
-            self._drive(self.resume)
-        elif self.phase == "resuming" and not self.resume.done:
-            self._drive(self.resume)
-        else:
+        if st.state != mav.RETURNLINK_STATE_TELEOP or st.owner != gs.sysid:
             gs.stop()
+            return
+        if self.phase == "driving" and self.leg.done and self.claims:
+            self.phase = "resuming"
+        leg = self.resume if self.phase == "resuming" else self.leg
+        if leg.done:
+            gs.stop()
+        else:
+            self._drive(leg)
 
     def _drive(self, leg: Leg) -> None:
         gs, v = self.gs, self.gs.vehicle

@@ -19,18 +19,15 @@ from pathlib import Path
 import numpy as np
 
 from gcs.plans import from_plan_items
-from gcs.station import GroundStation, mav
-from link.radio import LinkState, Radio, rssi_to_radio_status
+from gcs.station import GroundStation
+from link.proxy import RadioReport
+from link.radio import LinkState, Radio
 from link.transports import LockstepBus
-from sim.driver import SimDriver
+from sim.driver import simulated_vehicle
 from sim.operator import Operator
 from sim.scenario import Scenario
-from vehicle.app import DT, Vehicle
+from vehicle.app import DT
 from vehicle.lease import Holder
-from vehicle.mavlink import Endpoint
-from vehicle.params import load_defaults
-
-RADIO_SYSID, RADIO_COMPID = 51, 68  # what SiK telemetry radios use for their RADIO_STATUS
 
 
 @dataclass
@@ -59,7 +56,6 @@ class Trace:
     link: list[float] = field(default_factory=list)  # delivery probability to the operator's station
     rssi: list[float] = field(default_factory=list)
     heard: list[bool] = field(default_factory=list)  # owner heard within LNK_GOOD_S (the vehicle's view)
-    owner: list[int] = field(default_factory=list)
     cmd: list[tuple[float, float]] = field(default_factory=list)  # what the vehicle commanded the robot
 
 
@@ -87,16 +83,10 @@ class Run:
         self.scenario = sc = scenario
         self.kind = vehicle or sc.vehicle
         self.seed = sc.seed if seed is None else seed
-        rng = np.random.default_rng(self.seed)
-        self.driver = SimDriver(sc, self.kind, rng)
+        self.driver, self.vehicle, self.endpoint = simulated_vehicle(sc, self.kind, self.seed)
         self.world = self.driver.world
-        params = load_defaults()
-        for k, v in sc.params.items():
-            params.set(k, v)
-        self.vehicle = Vehicle(self.driver, params, sc.start, 0.0, seed=self.seed)
-        self.endpoint = Endpoint(self.vehicle)
         self.radio = Radio(sc.radio, self.world.attenuation_db, self.seed + 1)
-        self.radio_mav = mav.MAVLink(None, RADIO_SYSID, RADIO_COMPID)
+        self.radio_report = RadioReport()
         self.bus = LockstepBus()
         self.stations: dict[str, StationSim] = {}
         for s in sc.stations:
@@ -203,10 +193,7 @@ class Run:
         op = self.stations[self.scenario.operator_station]
         if not op.alive or op.state is None:
             return
-        rssi = 0 if self._jammed(op.name, t) else rssi_to_radio_status(op.state.rssi_dbm)
-        noise = rssi_to_radio_status(op.state.noise_dbm)
-        msg = self.radio_mav.radio_status_encode(rssi, rssi, 100, noise, noise, 0, 0)
-        data = msg.pack(self.radio_mav)
+        data = self.radio_report.frame(op.state, jammed=self._jammed(op.name, t))
         op.gs.feed(data, t)
         self._log_frame(data, t)
 
@@ -258,8 +245,7 @@ class Run:
         jammed = self._jammed(op.name, t)
         tr.link.append(0.0 if op.state is None or jammed else op.state.delivery)
         tr.rssi.append(math.nan if op.state is None else op.state.rssi_dbm)
-        tr.heard.append(v.link_good(t))
-        tr.owner.append(v.book.owner or 0)
+        tr.heard.append(v.link_is_good)
         tr.cmd.append(v.command_out)
         self._audit(v)
         returning = cur is not None and cur.holder is Holder.RETURN_SERVICE

@@ -15,12 +15,10 @@ import numpy as np
 from link.proxy import RadioProxy
 from link.radio import Radio
 from link.transports import UdpTransport
-from sim.driver import SimDriver
+from sim.driver import simulated_vehicle
 from sim.plots import draw_trail, draw_world, plt, save
 from sim.scenario import Scenario
-from vehicle.app import DT, Vehicle, run
-from vehicle.mavlink import Endpoint
-from vehicle.params import load_defaults
+from vehicle.app import DT, run
 
 
 class Server:
@@ -30,13 +28,7 @@ class Server:
         sc = self.scenario = scenario
         self.kind = vehicle or sc.vehicle
         self.seed = sc.seed if seed is None else seed
-        rng = np.random.default_rng(self.seed)
-        self.driver = SimDriver(sc, self.kind, rng)
-        params = load_defaults(param_file) if param_file and param_file.is_file() else load_defaults()
-        for k, v in sc.params.items():
-            params.set(k, v)
-        self.vehicle = Vehicle(self.driver, params, sc.start, 0.0, seed=self.seed)
-        self.endpoint = Endpoint(self.vehicle, param_file=param_file)
+        self.driver, self.vehicle, self.endpoint = simulated_vehicle(sc, self.kind, self.seed, param_file)
         self.transport = UdpTransport(("127.0.0.1", port), peers)
         station = sc.station(sc.operator_station)
         radio = None if perfect_link else Radio(sc.radio, self.driver.world.attenuation_db, self.seed + 1)

@@ -81,12 +81,11 @@ def test_any_command_from_a_stranger_changes_nothing(command, p, kind):
         y = int(p[5]) if math.isfinite(p[5]) and abs(p[5]) < 2**31 else 0
         msg = mav.MAVLink_command_int_message(1, 1, 0, command, 0, 0, p[0], p[1], p[2], p[3], x, y, p[6])
     before = snapshot(PAIR)
-    acks = len([1 for f in PAIR.heard])
     PAIR.endpoint.receive(_frame(66, msg), PAIR.t)
     frames = PAIR.endpoint.tick(PAIR.t)
     parsed = [PAIR.endpoint.parser.parse_buffer(f)[0] for f in frames]
     answers = [m for m in parsed if m.get_type() == "COMMAND_ACK" and m.target_system == 66]
-    assert len(answers) == 1 and acks >= 0
+    assert len(answers) == 1
     if command not in (mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_SET_MESSAGE_INTERVAL,
                        mav.MAV_CMD_GET_HOME_POSITION, mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
         assert answers[0].result != mav.MAV_RESULT_ACCEPTED

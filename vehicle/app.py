@@ -74,7 +74,7 @@ class LinkQuality:
         self.received += 1
         self.last_seq = seq
 
-    def value(self, t: float) -> float:
+    def value(self) -> float:
         total = self.received + self.lost
         return 1.0 if total <= 0 else self.received / total
 
@@ -127,7 +127,6 @@ class Vehicle:
         self.setpoint: Setpoint | None = None
         self.service: ServiceState | None = None
         self.service_index: int | None = None
-        self.service_sub: LeaseId | None = None
         self.outbound_speed = 0.0
         self.readings: Readings | None = None
         self.quality: dict[int, LinkQuality] = {}
@@ -136,6 +135,7 @@ class Vehicle:
         self.last_fix: tuple[float, float] | None = None  # the last fix used, for GPS_RAW_INT
         self.last_fix_t: float | None = None
         self.command_out = (0.0, 0.0)
+        self.link_is_good = False  # this tick's link tag (owner heard recently, with good quality)
         # everything the endpoint must announce, drained by it each tick
         self.events: list[LeaseEvent] = []
         self.event_log: list[LeaseEvent] = []  # every transition since boot, for the record
@@ -144,7 +144,6 @@ class Vehicle:
         # counters for the record: rejections are never silent, stale executions must stay 0
         self.commands_rejected = 0
         self.stale_commands_executed = 0
-        self.dropped_commands = 0
 
     # ----- lease transitions -------------------------------------------------------------------------------
     def _apply(self, out: Outcome) -> None:
@@ -153,9 +152,15 @@ class Vehicle:
         self.event_log.extend(out.events)
         for ev in out.events:
             self.notices.append(ev.describe())
-        self.dropped_commands += len(out.dropped)
         for q in out.released:
             self._execute(q.payload, q.lease, q.sender)
+
+    def refuses(self, sender: int) -> bool:
+        """Someone else owns the vehicle: a state change from ``sender`` is refused, and counted."""
+        if self.book.owner is not None and self.book.owner != sender:
+            self.commands_rejected += 1
+            return True
+        return False
 
     def _reject(self, chk: Check) -> Check:
         self.commands_rejected += 1
@@ -170,7 +175,7 @@ class Vehicle:
         if seq is not None:
             q = self.quality.setdefault(sysid, LinkQuality())
             q.update(seq, t)
-            good = q.value(t) >= GOOD_LINK_QUALITY
+            good = q.value() >= GOOD_LINK_QUALITY
         self.book = self.book.heard(sysid, t, good)
         if good and sysid == self.book.owner:
             self.last_good_packet = t
@@ -219,10 +224,11 @@ class Vehicle:
             return self._reject(Check(Verdict.REJECT, None, RejectReason.NOT_IN_CONTROL, "not the owner"))
         cur = book.current
         assert cur is not None
-        if cur.holder is Holder.OPERATOR and cur.claimed:
-            return book.check(sender) if book.claimed_by(sender) == book.current_id else self.claim(
-                sender, book.epoch, book.next_index, t)
-        return self.claim(sender, book.epoch, -1 if cur.holder is Holder.OPERATOR else book.next_index, t)
+        if cur.holder is Holder.OPERATOR and not cur.claimed:
+            return self.claim(sender, book.epoch, -1, t)  # resume: the fresh operator lease
+        if cur.holder is Holder.OPERATOR and book.claimed_by(sender) == book.current_id:
+            return book.check(sender)  # already driving under the current lease
+        return self.claim(sender, book.epoch, book.next_index, t)  # over a return: a newer lease
 
     def command(self, sender: int, compid: int, t: float, payload: tuple) -> Check:
         """A standard state-changing command under the sender's last claimed lease (DESIGN §3.4)."""
@@ -272,16 +278,13 @@ class Vehicle:
             return self._reject(Check(Verdict.REJECT, None, RejectReason.NOT_IN_CONTROL, "not the owner"))
         if cur.holder is not Holder.OPERATOR:
             return Check(Verdict.EXECUTE, self.book.current_id, detail="a return is already running")
-        stored = self.book.plan
-        self._apply(self.book.schedule_plan(blocks_from_items(items, self.params), t))
-        self.book = replace(self.book, plan=stored)
+        self._apply(self.book.schedule_plan(blocks_from_items(items, self.params), t, store=False))
         return self.rtl(sender, compid, t)
 
     def set_plan_start(self, seq: int, sender: int, compid: int, t: float) -> str | None:
         """MISSION_SET_CURRENT / DO_SET_MISSION_CURRENT: the return plan is scheduled from the block holding
         item ``seq`` on. Only while an operator lease is current, and only by the owner."""
-        if self.book.owner is not None and self.book.owner != sender:
-            self.commands_rejected += 1
+        if self.refuses(sender):
             return f"GCS {self.book.owner} is in control"
         items = self.plan_items
         if not 0 <= seq < max(1, len(items)):
@@ -291,13 +294,10 @@ class Vehicle:
             return "a return is running"
         if not items:
             return None
-        tail = tuple(it for it in items[seq:])
-        blocks = blocks_from_items(tail, self.params)
+        blocks = blocks_from_items(items[seq:], self.params)
         # keep the seq numbers of the whole mission
         blocks = tuple(replace(b, payload=tuple(replace(it, seq=it.seq + seq) for it in b.payload)) for b in blocks)
-        stored = blocks_from_items(items, self.params)
-        self._apply(self.book.schedule_plan(blocks, t))
-        self.book = replace(self.book, plan=stored)
+        self._apply(self.book.schedule_plan(blocks, t, store=False))
         return None
 
     def route_remaining(self) -> float:
@@ -335,7 +335,7 @@ class Vehicle:
         if owner is None or age is None or age > self.params["LNK_GOOD_S"]:
             return False
         q = self.quality.get(owner)
-        return q is None or q.value(t) >= GOOD_LINK_QUALITY
+        return q is None or q.value() >= GOOD_LINK_QUALITY
 
     def displacement(self) -> float:
         if self.service is None:
@@ -357,7 +357,8 @@ class Vehicle:
         if r.fix is not None and est.fix(r.fix.x, r.fix.y, r.fix.std):
             self.last_fix, self.last_fix_t = (r.fix.x, r.fix.y), t
         p = est.pose
-        self._crumbs.append(Crumb(p.x, p.y, t, p.std, self.link_good(t)))
+        self.link_is_good = self.link_good(t)
+        self._crumbs.append(Crumb(p.x, p.y, t, p.std, self.link_is_good))
 
         self._apply(self.book.tick(t))
         cur = self.book.current
@@ -387,7 +388,7 @@ class Vehicle:
         book = self.book
         cur = book.current
         if cur is None or cur.holder is Holder.OPERATOR:
-            self.service, self.service_index, self.service_sub = None, None, None
+            self.service, self.service_index = None, None
             return self._teleop(t)
         self.setpoint = None
         link_lost = book.link.lost
@@ -400,7 +401,7 @@ class Vehicle:
         if step.replanned and book.current_id is not None:
             if not fresh and self.service is not None:
                 self.reached.append(self.service.items[self.service.item].seq)
-            self.book, self.service_sub = self.book.issue_sublease(book.current_id)
+            self.book, _ = self.book.issue_sublease(book.current_id)
         self.service = step.state
         if step.finished is not None:
             st = step.state
@@ -420,7 +421,6 @@ class Vehicle:
         if self.book.check(self.book.owner or 0, sp.lease).verdict is not Verdict.EXECUTE:
             # the lease this setpoint was sent under is gone: it must not drive the robot any more
             self.setpoint = None
-            self.dropped_commands += 1
             return 0.0, 0.0
         if self.book.current_id is None or sp.lease.path[0] != self.book.current_id.path[0]:
             # a last guard at the actuator, independent of how the setpoint got here: never drive on it

@@ -440,17 +440,19 @@ class LeaseBook:
         leases = (replace(cur, newest_sub=child.sub), *self.leases[1:])
         return replace(self, leases=leases), child
 
-    def schedule_plan(self, plan: Iterable[ServiceBlock], t: float) -> Outcome:
-        """Store a new return plan and schedule it behind the current operator lease (mission upload)."""
+    def schedule_plan(self, plan: Iterable[ServiceBlock], t: float, store: bool = True) -> Outcome:
+        """Schedule a return plan behind the current operator lease. ``store`` (a mission upload) also makes it
+        the plan re-armed from now on; without it (a one-off return, a plan started mid-way) the stored plan
+        stays the one re-armed afterwards."""
         plan = tuple(plan)
-        book = replace(self, plan=plan)
+        book = replace(self, plan=plan) if store else self
         if self.owner is None or self.leases[0].holder is not Holder.OPERATOR:
             return Outcome(book)
         kept = book.leases[:1]
         still_queued = tuple(q for q in book.queue if q.lease.path[0] == kept[0].index)
         gone = tuple(q for q in book.queue if q.lease.path[0] != kept[0].index)
         book = replace(book, leases=kept, queue=still_queued)
-        return Outcome(book._arm(t, force=True), dropped=gone)
+        return Outcome(book._arm(t, force=True, plan=plan), dropped=gone)
 
     def enqueue(self, command: QueuedCommand) -> LeaseBook:
         return replace(self, queue=(*self.queue, command))
@@ -493,9 +495,11 @@ class LeaseBook:
         out = book._expire_current(t, reason)
         return replace(out, dropped=dropped + out.dropped)
 
-    def _arm(self, t: float, force: bool = False) -> LeaseBook:
-        """Re-arm (DESIGN §3.7): behind a current operator lease, with the link up, schedule the return plan."""
-        if self.owner is None or not self.leases or not self.plan:
+    def _arm(self, t: float, force: bool = False, plan: tuple[ServiceBlock, ...] | None = None) -> LeaseBook:
+        """Re-arm (DESIGN §3.7): behind a current operator lease, with the link up, schedule the return plan
+        (``plan``, or the stored one)."""
+        plan = self.plan if plan is None else plan
+        if self.owner is None or not self.leases or not plan:
             return self
         cur = self.leases[0]
         if cur.holder is not Holder.OPERATOR or len(self.leases) > 1 or self.link.lost:
@@ -505,7 +509,7 @@ class LeaseBook:
         chain = self.chains + 1
         blocks = tuple(
             ExecutionLease(self.next_index + k, Holder.RETURN_SERVICE, LeaseState.SCHEDULED, block=b, chain=chain)
-            for k, b in enumerate(self.plan)
+            for k, b in enumerate(plan)
         )
         return replace(self, leases=(cur, *blocks), next_index=self.next_index + len(blocks), chains=chain)
 

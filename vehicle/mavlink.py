@@ -16,11 +16,22 @@ from pathlib import Path
 from link import dialect
 from vehicle.app import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, Vehicle, velocity_to_command
 from vehicle.lease import Check, RejectReason, Verdict
-from vehicle.missions import ACCEPTED, DENIED, INVALID, UNSUPPORTED, Item, MissionServer, Origin, to_plan
+from vehicle.missions import (
+    ACCEPTED,
+    DENIED,
+    INVALID,
+    UNSUPPORTED,
+    Item,
+    MissionServer,
+    Origin,
+    item_from_message,
+    position_scale,
+    to_plan,
+)
 from vehicle.modes import decode_mode
 from vehicle.params import SPECS, ParamError, format_parm
 from vehicle.service import NAV_RETURN_TO_LINK, PlanItem
-from vehicle.telemetry import NO_INDEX, Telemetry
+from vehicle.telemetry import Telemetry, wire_index
 
 mav = dialect.load()
 
@@ -85,8 +96,6 @@ class Endpoint:
         self.telemetry = Telemetry(self.mav, vehicle, self.origin, boot_t,
                                    lambda: (self.counters.frames, self.counters.bad_frames),
                                    lambda: len(self.missions.lists[0]))
-        self.t = boot_t
-        self.log: Callable[[str], None] | None = None
 
     # ----- output --------------------------------------------------------------------------------------------
     def _send(self, name: str, **fields) -> None:
@@ -108,7 +117,6 @@ class Endpoint:
     # ----- input ---------------------------------------------------------------------------------------------
     def receive(self, data: bytes, t: float) -> None:
         """Parse and handle whatever frames ``data`` holds; garbage is counted and dropped."""
-        self.t = t
         try:
             msgs = self.parser.parse_buffer(data) or []
         except Exception:  # noqa: BLE001 - a hostile byte stream must never take the vehicle down
@@ -335,10 +343,8 @@ class Endpoint:
         """A return-plan upload is a state change: only the owner (or a plain client auto-granted) may."""
         v = self.vehicle
         v.admit(sender, scomp, t)
-        owner = v.book.owner
-        if owner is not None and owner != sender:
-            v.commands_rejected += 1
-            return DENIED, f"mission from {sender} refused: GCS {owner} is in control"
+        if v.refuses(sender):
+            return DENIED, f"mission from {sender} refused: GCS {v.book.owner} is in control"
         return ACCEPTED, ""
 
     def _accept_mission(self, mission_type: int, items: tuple[Item, ...], sysid: int, compid: int,
@@ -363,21 +369,17 @@ class Endpoint:
             self.statustext(why, mav.MAV_SEVERITY_WARNING)
 
     def _on_mission_item_int(self, m, sender, scomp, t):
-        item = Item(m.seq, m.frame, m.command, m.current, m.autocontinue, m.param1, m.param2, m.param3, m.param4,
-                    int(m.x), int(m.y), m.z, getattr(m, "mission_type", 0))
-        why = self.missions.on_item(sender, scomp, item, t)
+        why = self.missions.on_item(sender, scomp, item_from_message(m), t)
         if why:
             self.statustext(why, mav.MAV_SEVERITY_WARNING)
 
     def _on_mission_item(self, m, sender, scomp, t):
         """The deprecated float item (MAVProxy still sends it): stored in the MISSION_ITEM_INT form."""
-        scale = 1e7 if m.frame in (0, 3, 5, 6, 10, 11) else (1e4 if m.frame in (1, 7) else 1.0)
+        scale = position_scale(m.frame)
         x, y = _finite(m.x) * scale, _finite(m.y) * scale
         if abs(x) > 2**31 - 1 or abs(y) > 2**31 - 1:
             raise ValueError("position out of range")
-        item = Item(m.seq, m.frame, m.command, m.current, m.autocontinue, m.param1, m.param2, m.param3, m.param4,
-                    round(x), round(y), m.z, getattr(m, "mission_type", 0))
-        why = self.missions.on_item(sender, scomp, item, t)
+        why = self.missions.on_item(sender, scomp, item_from_message(m, round(x), round(y)), t)
         if why:
             self.statustext(why, mav.MAV_SEVERITY_WARNING)
 
@@ -433,10 +435,9 @@ class Endpoint:
         if name not in names:
             self.statustext(f"param set refused: no parameter {name!r}", mav.MAV_SEVERITY_WARNING)
             return
-        owner = self.vehicle.book.owner
-        if owner is not None and owner != sender:
-            self.vehicle.commands_rejected += 1
-            self.statustext(f"param set from {sender} refused: GCS {owner} is in control", mav.MAV_SEVERITY_WARNING)
+        if self.vehicle.refuses(sender):
+            self.statustext(f"param set from {sender} refused: GCS {self.vehicle.book.owner} is in control",
+                            mav.MAV_SEVERITY_WARNING)
         else:
             try:
                 self.vehicle.set_param(name, float(m.param_value))
@@ -452,10 +453,10 @@ class Endpoint:
 
     def tick(self, t: float) -> list[bytes]:
         """Announce lease events, send due telemetry, and return every frame produced since the last tick."""
-        self.t = t
         v = self.vehicle
         for ev in v.events:
-            self.mav.lease_event_send(self.telemetry.boot_ms(ev.t), ev.epoch, _idx(ev.expired), _idx(ev.current),
+            self.mav.lease_event_send(self.telemetry.boot_ms(ev.t), ev.epoch, wire_index(ev.expired),
+                                      wire_index(ev.current),
                                       int(ev.reason), int(ev.holder))
         v.events.clear()
         for text in v.notices:
@@ -472,6 +473,7 @@ class Endpoint:
         frames = self._sink.frames
         self._sink.frames = []
         return frames
+
 
 COMMANDS: dict[int, Callable[..., tuple[int, int]]] = {
     mav.MAV_CMD_COMPONENT_ARM_DISARM: Endpoint._cmd_arm,
@@ -508,9 +510,3 @@ def _param_name(raw) -> str:
     if isinstance(raw, bytes):
         raw = raw.decode("ascii", "replace")
     return raw.split("\x00", 1)[0]
-
-
-
-
-def _idx(i: int | None) -> int:
-    return NO_INDEX if i is None else i

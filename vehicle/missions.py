@@ -64,6 +64,17 @@ class Origin:
         return x, y
 
 
+def position_scale(frame: int) -> float:
+    """What MISSION_ITEM_INT (and a QGC WPL file, after scaling) multiplies x/y by in this frame."""
+    return 1e7 if frame in GLOBAL_FRAMES else (1e4 if frame in LOCAL_FRAMES else 1.0)
+
+
+def item_from_message(m, x: int | None = None, y: int | None = None) -> Item:
+    """A MISSION_ITEM_INT (or a MISSION_ITEM with its x/y already scaled) as an ``Item``."""
+    return Item(m.seq, m.frame, m.command, m.current, m.autocontinue, m.param1, m.param2, m.param3, m.param4,
+                int(m.x) if x is None else x, int(m.y) if y is None else y, m.z, getattr(m, "mission_type", 0))
+
+
 def to_plan(items: tuple[Item, ...], origin: Origin) -> tuple[PlanItem, ...]:
     """Mission items -> return-plan items in the local frame. Raises ValueError naming an unusable item."""
     out = []
@@ -211,7 +222,7 @@ class MissionServer:
         if as_int:
             self.send("mission_item_int", x=it.x, y=it.y, **fields)
         else:
-            scale = 1e7 if it.frame in GLOBAL_FRAMES else (1e4 if it.frame in LOCAL_FRAMES else 1.0)
+            scale = position_scale(it.frame)
             self.send("mission_item", x=it.x / scale, y=it.y / scale, **fields)
 
     def on_clear(self, sysid: int, compid: int, mission_type: int, t: float, allowed: tuple[int, str]) -> str | None:

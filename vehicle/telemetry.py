@@ -225,7 +225,7 @@ class Telemetry:
         remaining = v.route_remaining()
         self.mav.lease_status_send(
             self.boot_ms(t), b.epoch or 0, b.owner or 0, b.owner_compid if b.owner else 0,
-            _idx(cur.index if cur else None), cur.newest_sub[0] if cur and cur.newest_sub else NO_INDEX,
+            wire_index(cur.index if cur else None), cur.newest_sub[0] if cur and cur.newest_sub else NO_INDEX,
             int(cur.holder) if cur else int(Holder.NONE), int(cur.claimed) if cur else 0, len(b.scheduled),
             v.state(), int(b.last_reason),
             0xFFFFFFFF if age is None else int(min(age, 4e6) * 1000), start[0], start[1], target[0], target[1],
@@ -249,6 +249,6 @@ BUILDERS: dict[int, Callable[[Telemetry, float], None]] = {
 }
 
 
-
-def _idx(i: int | None) -> int:
+def wire_index(i: int | None) -> int:
+    """A lease index on the wire: 65535 for none."""
     return NO_INDEX if i is None else i
