@@ -30,7 +30,7 @@ def mavproxy(tmp_path):
     log = tmp_path / "mavproxy.txt"
     proc = subprocess.Popen(
         [*_mavproxy(), f"--master=udpin:127.0.0.1:{served.gcs_port}", "--dialect=returnlink",
-         "--state-basedir", str(tmp_path), "--default-modules=wp,param,mode,cmdlong,link,log"],
+         "--state-basedir", str(tmp_path), "--default-modules=wp,param,mode,cmdlong,link,log,fence,arm"],
         stdin=subprocess.PIPE, stdout=log.open("w"), stderr=subprocess.STDOUT, text=True, cwd=tmp_path)
 
     def say(command: str) -> None:
@@ -56,12 +56,15 @@ def test_param_set_show_and_refusal(mavproxy):
     wait_until(lambda: "outside 0.5..120" in log.read_text(), 10, "the refusal STATUSTEXT in MAVProxy")
     time.sleep(0.5)
     assert served.vehicle.params["LNK_TIMEOUT"] == 5.0
+    assert "fence breach" not in log.read_text()  # no fence, none breached
 
 
 def test_wp_load_schedules_the_plan_and_mode_rtl_returns(mavproxy, tmp_path):
     served, say, log = mavproxy
     plan = tmp_path / "plan.txt"
     plan.write_text(PLAN)
+    say("arm throttle")
+    wait_until(lambda: served.vehicle.armed, 10, "arm throttle to arm the vehicle")
     say(f"wp load {plan}")
     wait_until(lambda: "TYPE_MISSION: ACCEPTED" in log.read_text(), 15, "MISSION_ACK accepted")
     assert len(served.vehicle.book.plan) == 2

@@ -140,7 +140,9 @@ class Telemetry:
         v = self.vehicle
         gps_ok = v.readings is not None and v.estimator.fixes_used > 0 and self._fix_age(t) < 3.0
         present = HEALTH_SENSORS | mav.MAV_SYS_STATUS_SENSOR_GPS
-        health = HEALTH_SENSORS | (mav.MAV_SYS_STATUS_SENSOR_GPS if gps_ok else 0)
+        # no geofence here, and none breached: the health bit is set as ArduPilot does, or MAVProxy announces
+        # "fence breach" on the first SYS_STATUS
+        health = HEALTH_SENSORS | mav.MAV_SYS_STATUS_GEOFENCE | (mav.MAV_SYS_STATUS_SENSOR_GPS if gps_ok else 0)
         frames, bad = self.link_stats()
         drop = int(min(10000, 10000 * bad / max(1, frames + bad)))
         self.mav.sys_status_send(present, present, health, 200, 24000, 1000, 90, drop, min(bad, 65535), 0, 0, 0, 0)
