@@ -25,6 +25,7 @@ from link.radio import LinkState, Radio
 from link.transports import LockstepBus
 from sim.driver import simulated_vehicle
 from sim.operator import Operator
+from sim.policies import DEFAULT_POLICY, check_policy
 from sim.scenario import Scenario
 from vehicle.app import DT
 from vehicle.lease import Holder
@@ -79,8 +80,11 @@ class BlockRecord:
 
 class Run:
     def __init__(self, scenario: Scenario, vehicle: str | None = None, seed: int | None = None,
-                 progress: bool = False, duration: float | None = None) -> None:
+                 progress: bool = False, duration: float | None = None, policy: str = DEFAULT_POLICY) -> None:
         self.scenario = sc = scenario
+        self.policy = check_policy(policy)
+        if self.policy != DEFAULT_POLICY:
+            raise ValueError(f"policy {policy!r} cannot be flown yet")
         self.kind = vehicle or sc.vehicle
         self.seed = sc.seed if seed is None else seed
         self.driver, self.vehicle, self.endpoint = simulated_vehicle(sc, self.kind, self.seed)
