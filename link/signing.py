@@ -202,7 +202,7 @@ def enable(mav, key: Key, timestamp: int, link_id: int = 0) -> None:
     s = mav.signing
     s.secret_key = key.secret
     s.link_id = link_id
-    s.timestamp = max(int(s.timestamp or 0), timestamp)
+    s.timestamp = min(MAX_TIMESTAMP, max(int(s.timestamp or 0), timestamp))  # 48 bits on the wire
     s.sign_outgoing = True
 
 

@@ -288,3 +288,11 @@ def test_a_keyed_station_believes_no_forged_answer():
     assert not p.done and pair.gs.refused[Verdict.UNSIGNED] == 1
     pair.until(lambda: p.done, 2, "the vehicle's own ACK")
     assert p.ok
+
+
+def test_a_setup_signing_timestamp_beyond_48_bits_is_refused():
+    pair = keyed(intruders=())
+    pair.gs.mav.setup_signing_send(1, 1, list(OTHER.secret), 2**48)
+    pair.step(0.5)
+    assert pair.endpoint.key == KEY
+    assert any("initial timestamp outside 48 bits" in text for _, text in pair.gs.texts)

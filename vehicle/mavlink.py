@@ -16,7 +16,7 @@ from enum import Enum
 from pathlib import Path
 
 from link import dialect
-from link.signing import Key, Streams, advance, enable, sim_stamp, timestamp_of
+from link.signing import MAX_TIMESTAMP, Key, Streams, advance, enable, sim_stamp, timestamp_of
 from link.signing import Verdict as SignVerdict
 from vehicle.app import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, Vehicle, velocity_to_command
 from vehicle.keystore import STAMP_SAVE_EVERY, KeyStore, boot_stamp
@@ -502,6 +502,9 @@ class Endpoint:
         if len(secret) != 32 or not any(secret):
             self.statustext("signing setup refused: signing cannot be switched off over the link",
                             mav.MAV_SEVERITY_WARNING)
+            return
+        if not 0 <= m.initial_timestamp <= MAX_TIMESTAMP:
+            self.statustext("signing setup refused: initial timestamp outside 48 bits", mav.MAV_SEVERITY_WARNING)
             return
         key = Key(secret)
         if self.keystore is not None:
