@@ -7,12 +7,15 @@ with the key throughout, in simulated time (tests/harness.py).
 
 from __future__ import annotations
 
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
 from gcs.plans import parse_spec
 from link.signing import Key, Verdict, signature_block, sim_stamp
 from tests.harness import Pair
 from vehicle.app import State
 from vehicle.keystore import KeyStore, read_key, write_key
-from vehicle.mavlink import ACCESS, Access, mav
+from vehicle.mavlink import ACCESS, COMMANDS, Access, mav
 
 KEY = Key(bytes(range(32)))
 OTHER = Key(bytes(range(100, 132)))
@@ -296,3 +299,26 @@ def test_a_setup_signing_timestamp_beyond_48_bits_is_refused():
     pair.step(0.5)
     assert pair.endpoint.key == KEY
     assert any("initial timestamp outside 48 bits" in text for _, text in pair.gs.texts)
+
+
+COMMAND_IDS = sorted(COMMANDS)
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.sampled_from(COMMAND_IDS), st.lists(st.floats(-1e3, 1e5, allow_nan=False), min_size=7, max_size=7),
+       st.sampled_from(["long", "int"]))
+def test_property_no_command_from_a_station_without_the_key_changes_anything(command, p, kind):
+    pair = keyed()
+    v, intruder = pair.vehicle, pair.intruders[0]
+    before = (v.book, v.armed, v.holding, dict(v.params.values), v.plan_items,
+              dict(pair.endpoint.telemetry.intervals))
+    if kind == "long":
+        intruder.mav.command_long_send(1, 1, command, 0, *p)
+    else:
+        intruder.mav.command_int_send(1, 1, 0, command, 0, 0, *p[:4], int(p[4]), int(p[5]), p[6])
+    pair.step(0.1)
+    after = (v.book, v.armed, v.holding, dict(v.params.values), v.plan_items,
+             dict(pair.endpoint.telemetry.intervals))
+    assert after[1:] == before[1:]
+    assert (after[0].epoch, after[0].owner, after[0].current_id) == (before[0].epoch, before[0].owner,
+                                                                     before[0].current_id)
