@@ -18,6 +18,8 @@ def add_parser(sub) -> None:
     g.add_argument("--sysid", type=int, default=255, help="this ground station's MAVLink system id")
     g.add_argument("--target", type=int, default=1, help="the vehicle's system id")
     g.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for the vehicle")
+    g.add_argument("--key", help="signing key file (64 hex characters): sign everything, believe only the "
+                   "vehicle's signed frames")
     gs = g.add_subparsers(dest="gcs_command", required=True)
     gs.add_parser("status", help="one status report")
     w = gs.add_parser("watch", help="live one-screen view (Ctrl-C to stop)")
@@ -105,8 +107,17 @@ def run(args: argparse.Namespace) -> int:
         print(describe(_plan_items(args)))
         return 0
     items = _plan_items(args) if args.gcs_command == "plan" and args.plan_command == "upload" else None
+    key = None
+    if args.key:
+        from link.signing import KeyFileError, load_key
+
+        try:
+            key = load_key(args.key)
+        except KeyFileError as e:
+            print(f"returnlink gcs: error: key file {e}", file=sys.stderr)
+            return 2
     try:
-        with Client(args.url, args.sysid, target=args.target) as c:
+        with Client(args.url, args.sysid, target=args.target, key=key) as c:
             c.connect(args.timeout)
             cmd = args.gcs_command
             if cmd == "status":

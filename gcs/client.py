@@ -11,11 +11,13 @@ Every wait has a timeout and raises ``GcsError`` saying what did not happen.
 
 from __future__ import annotations
 
+import secrets
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 from gcs.station import GroundStation, Pending, Transfer, mav
+from link.signing import Key, stamp_from_unix
 from link.transports import UdpTransport
 from vehicle.missions import Item
 from vehicle.params import ParamError, format_parm, parse_parm
@@ -43,15 +45,20 @@ def parse_url(url: str) -> tuple[tuple[str, int], tuple[tuple[str, int], ...]]:
 
 class Client:
     def __init__(self, url: str = "udpin:127.0.0.1:14550", sysid: int = 255, compid: int = 190,
-                 target: int = 1, clock: Callable[[], float] = time.monotonic) -> None:
+                 target: int = 1, clock: Callable[[], float] = time.monotonic, key: Key | None = None,
+                 wall: Callable[[], float] = time.time) -> None:
+        """With ``key`` everything sent is signed; timestamps follow the wall clock, on a link id of this session's
+        own, so two sessions of one station (``gcs watch`` beside ``gcs rtl``) are two streams, not replays."""
         bind, peers = parse_url(url)
         try:
             self.transport = UdpTransport(bind, peers)
         except OSError as e:
             raise GcsError(f"cannot open {url}: {e}") from None
-        self.gs = GroundStation(sysid, compid, target)
         self.clock = clock
         self.t0 = clock()
+        wall0 = wall()
+        self.gs = GroundStation(sysid, compid, target, key=key, link_id=secrets.randbelow(256),
+                                stamp=lambda t: stamp_from_unix(wall0 + t))
 
     def __enter__(self) -> Client:
         return self
@@ -90,8 +97,16 @@ class Client:
     # ----- connection and status -----------------------------------------------------------------------------
     def connect(self, timeout: float = 10.0) -> None:
         self.gs.t = self.now
-        self.wait_for(lambda: self.gs.vehicle.last_heard is not None and self.gs.vehicle.status is not None,
-                      timeout, "a returnlink vehicle (HEARTBEAT and LEASE_STATUS)")
+        try:
+            self.wait_for(lambda: self.gs.vehicle.last_heard is not None and self.gs.vehicle.status is not None,
+                          timeout, "a returnlink vehicle (HEARTBEAT and LEASE_STATUS)")
+        except GcsError as e:
+            refused = sum(self.gs.refused.values())
+            if refused:
+                kinds = ", ".join(f"{n} {v.value}" for v, n in self.gs.refused.items())
+                why = f"{refused} frames from the vehicle were not signed with this key ({kinds})"
+                raise GcsError(f"{e}; {why}") from None
+            raise
 
     def call(self, pending: Pending, timeout: float = 6.0, what: str = "") -> Pending:
         self.wait_for(lambda: pending.done, timeout, f"an answer to {what or pending.command}")

@@ -8,10 +8,12 @@ simulated time; ``gcs.client.Client`` drives it over UDP with the wall clock and
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 from link import dialect
+from link.signing import Key, Streams, Verdict, advance, enable, sim_stamp
 from vehicle.missions import Item, item_from_message
 
 mav = dialect.load()
@@ -127,11 +129,19 @@ class Vehicle:
 
 
 class GroundStation:
-    def __init__(self, sysid: int = 255, compid: int = 190, target: int = 1, target_comp: int = 1) -> None:
+    def __init__(self, sysid: int = 255, compid: int = 190, target: int = 1, target_comp: int = 1,
+                 key: Key | None = None, link_id: int = 0, stamp: Callable[[float], int] = sim_stamp) -> None:
+        """With ``key`` every frame sent is signed (DESIGN §4.1) and only the vehicle's frames signed with the same
+        key are believed; ``stamp(t)`` is the signing clock (the wall clock for a real station)."""
         self.sysid, self.compid = sysid, compid
         self.target, self.target_comp = target, target_comp
         self.frames: list[bytes] = []
         self.mav = mav.MAVLink(self, sysid, compid)
+        self.key, self.stamp = key, stamp
+        self.streams = Streams()
+        self.refused: Counter = Counter()  # the vehicle's frames not believed, per signing Verdict
+        if key is not None:
+            enable(self.mav, key, stamp(0.0), link_id)
         self.parser = mav.MAVLink(None, 0, 0)
         self.parser.robust_parsing = True
         self.vehicle = Vehicle()
@@ -165,6 +175,8 @@ class GroundStation:
 
     def tick(self, t: float) -> list[bytes]:
         self.t = t
+        if self.key is not None:
+            advance(self.mav, self.stamp(t))
         if t >= self.next_heartbeat:
             self.next_heartbeat = t + 1.0
             self.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, mav.MAV_STATE_ACTIVE)
@@ -256,6 +268,18 @@ class GroundStation:
         self.mav.param_set_send(self.target, self.target_comp, name.encode(), float(value),
                                 mav.MAV_PARAM_TYPE_REAL32)
 
+    # ----- signing -------------------------------------------------------------------------------------------
+    def rotate_key(self, new: Key) -> None:
+        """SETUP_SIGNING signed with the current key, then sign with ``new`` (the vehicle answers with its new key).
+
+        A vehicle takes a new key only over a link already signed with its installed one (DESIGN §4.1)."""
+        if self.key is None:
+            raise ValueError("key rotation needs the vehicle's current key")
+        ts = advance(self.mav, self.stamp(self.t))
+        self.mav.setup_signing_send(self.target, self.target_comp, list(new.secret), ts)
+        self.key = new
+        enable(self.mav, new, ts + 1, self.mav.signing.link_id)
+
     # ----- missions ------------------------------------------------------------------------------------------
     def upload(self, items: list[Item], mission_type: int = 0) -> Transfer:
         items = [replace(it, seq=k, mission_type=mission_type) for k, it in enumerate(items)]
@@ -301,6 +325,12 @@ class GroundStation:
             return
         if m.get_srcSystem() != self.target:
             return
+        if self.key is not None:
+            own = advance(self.mav, self.stamp(t))
+            self.streams, verdict = self.streams.verify(self.key, bytes(m.get_msgbuf()), own)
+            if verdict is not Verdict.ACCEPT:
+                self.refused[verdict] += 1  # a forged ACK or status must not be believed
+                return
         v = self.vehicle
         v.last_heard = t
         ts = getattr(m, "target_system", 0)

@@ -75,9 +75,19 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
         print("returnlink: error: --speedup must be positive", file=sys.stderr)
         return 2
     peers = tuple(args.peer) if args.peer else (("127.0.0.1", 14550), ("127.0.0.1", 14540))
+    keystore = None
+    if args.key:
+        from vehicle.keystore import KeyStore
+        from vehicle.storage import StoredFileError
+
+        try:
+            keystore = KeyStore.open(args.key)
+        except StoredFileError as e:
+            print(f"returnlink: error: key file {e}", file=sys.stderr)
+            return 2
     try:
         server = Server(sc, args.vehicle, args.seed, args.port, peers, args.perfect_link,
-                        Path(args.params) if args.params else None)
+                        Path(args.params) if args.params else None, keystore)
     except OSError as e:
         print(f"returnlink: error: cannot bind 127.0.0.1:{args.port}: {e}", file=sys.stderr)
         return 2
@@ -88,7 +98,8 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
               f"vehicle will think an idle station lost. Raise LNK_TIMEOUT or lower --speedup.", file=sys.stderr)
     host, port = server.address
     print(f"returnlink: {sc.name} ({server.kind}) on udp {host}:{port}, sending to "
-          + ", ".join(f"{h}:{p}" for h, p in peers) + ("" if args.perfect_link else ", through the radio model"),
+          + ", ".join(f"{h}:{p}" for h, p in peers) + ("" if args.perfect_link else ", through the radio model")
+          + ("" if keystore is None else f"; signing with key {keystore.key.fingerprint} from {keystore.path}"),
           file=sys.stderr, flush=True)
     try:
         server.serve(args.speedup, args.duration)
@@ -98,6 +109,26 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
         server.close()
         out = Path(args.out) if args.out else Path("out") / f"serve-{sc.name}-{server.kind}"
         print(f"returnlink: wrote {server.plot(out / 'trajectory.png')}", file=sys.stderr)
+    return 0
+
+
+def _cmd_keys(args: argparse.Namespace) -> int:
+    from link.signing import Key
+    from vehicle.keystore import write_key
+
+    if args.passphrase is not None and not args.passphrase:
+        print("returnlink: error: --passphrase must not be empty", file=sys.stderr)
+        return 2
+    key = Key.generate() if args.passphrase is None else Key.from_passphrase(args.passphrase)
+    try:
+        write_key(args.file, key, force=args.force)
+    except FileExistsError as e:
+        print(f"returnlink: error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:
+        print(f"returnlink: error: cannot write {args.file}: {e.strerror or e}", file=sys.stderr)
+        return 2
+    print(f"returnlink: wrote signing key {key.fingerprint} to {args.file} (mode 0600)")
     return 0
 
 
@@ -130,7 +161,16 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--duration", type=float, default=float("inf"), help="stop after this many simulated s")
     serve.add_argument("--params", help=".parm file to boot from and save parameter changes to")
     serve.add_argument("--out", help="where to write the plot on exit")
+    serve.add_argument("--key", help="signing key file (returnlink keys new): sign everything, obey only signed "
+                       "frames; its timestamp is kept in FILE.stamp")
     serve.set_defaults(func=_cmd_sim_serve)
+    keys = sub.add_parser("keys", help="MAVLink signing keys").add_subparsers(dest="keys_command", required=True)
+    new = keys.add_parser("new", help="write a fresh random signing key (mode 0600)")
+    new.add_argument("file")
+    new.add_argument("--force", action="store_true", help="replace an existing key file")
+    new.add_argument("--passphrase", help="derive the key from a passphrase instead (SHA-256, as MAVProxy's "
+                     "'signing key PASSPHRASE' does), so MAVProxy can sign with it")
+    new.set_defaults(func=_cmd_keys)
     from gcs import cli as gcs_cli
 
     gcs_cli.add_parser(sub)

@@ -45,8 +45,8 @@ class SimDriver:
         return self.robot.pose
 
 
-def simulated_vehicle(scenario: Scenario, kind: str, seed: int,
-                      param_file: Path | None = None) -> tuple[SimDriver, Vehicle, Endpoint]:
+def simulated_vehicle(scenario: Scenario, kind: str, seed: int, param_file: Path | None = None,
+                      **endpoint_options) -> tuple[SimDriver, Vehicle, Endpoint]:
     """The scenario's robot with the real onboard software on it: boot parameters from ``param_file`` (or the
     defaults), then the scenario's own, as `sim run` and `sim serve` both start it."""
     driver = SimDriver(scenario, kind, np.random.default_rng(seed))
@@ -54,4 +54,4 @@ def simulated_vehicle(scenario: Scenario, kind: str, seed: int,
     for k, v in scenario.params.items():
         params.set(k, v)
     vehicle = Vehicle(driver, params, scenario.start, 0.0, seed=seed)
-    return driver, vehicle, Endpoint(vehicle, param_file=param_file)
+    return driver, vehicle, Endpoint(vehicle, param_file=param_file, **endpoint_options)

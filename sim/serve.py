@@ -8,27 +8,33 @@ trajectory plot of what happened.
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
 
 from link.proxy import RadioProxy
 from link.radio import Radio
+from link.signing import stamp_from_unix
 from link.transports import UdpTransport
 from sim.driver import simulated_vehicle
 from sim.plots import draw_trail, draw_world, plt, save
 from sim.scenario import Scenario
 from vehicle.app import DT, run
+from vehicle.keystore import KeyStore
 
 
 class Server:
     def __init__(self, scenario: Scenario, vehicle: str | None = None, seed: int | None = None,
                  port: int = 14580, peers: tuple[tuple[str, int], ...] = (("127.0.0.1", 14550), ("127.0.0.1", 14540)),
-                 perfect_link: bool = False, param_file: Path | None = None) -> None:
+                 perfect_link: bool = False, param_file: Path | None = None, keystore: KeyStore | None = None) -> None:
+        """``keystore`` (``KeyStore.open(FILE)``): the vehicle signs with that key and obeys only frames signed with
+        it; its signing clock is the wall clock, as ground stations' are."""
         sc = self.scenario = scenario
         self.kind = vehicle or sc.vehicle
         self.seed = sc.seed if seed is None else seed
-        self.driver, self.vehicle, self.endpoint = simulated_vehicle(sc, self.kind, self.seed, param_file)
+        self.driver, self.vehicle, self.endpoint = simulated_vehicle(
+            sc, self.kind, self.seed, param_file, keystore=keystore, stamp=lambda t: stamp_from_unix(time.time()))
         self.transport = UdpTransport(("127.0.0.1", port), peers)
         station = sc.station(sc.operator_station)
         radio = None if perfect_link else Radio(sc.radio, self.driver.world.attenuation_db, self.seed + 1)
@@ -69,6 +75,7 @@ class Server:
             stop=lambda: self.vehicle.t >= duration or stop(), after_tick=self._after_tick)
 
     def close(self) -> None:
+        self.endpoint.close()  # the signing timestamp to disk
         self.transport.close()
 
     def plot(self, path: Path) -> Path:

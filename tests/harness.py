@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from gcs.station import GroundStation
+from link.signing import Key
 from sim.driver import SimDriver
 from sim.scenario import load
 from vehicle.app import DT, Vehicle
@@ -13,12 +14,18 @@ from vehicle.params import load_defaults
 
 
 class Pair:
-    def __init__(self, scenario: str = "open", vehicle: str = "rover", seed: int = 1, stations=(255,)) -> None:
+    def __init__(self, scenario: str = "open", vehicle: str = "rover", seed: int = 1, stations=(255,),
+                 vehicle_key: Key | None = None, keys: dict[int, Key] | None = None, intruders=(),
+                 **endpoint_options) -> None:
+        """``vehicle_key`` installs a signing key on the vehicle, ``keys`` gives stations theirs; ``intruders`` are
+        extra stations without a key, by sysid (they may share a sysid with a station: spoofing)."""
         sc = load(scenario)
         self.driver = SimDriver(sc, vehicle, np.random.default_rng(seed))
         self.vehicle = Vehicle(self.driver, load_defaults(), sc.start, 0.0, seed=seed)
-        self.endpoint = Endpoint(self.vehicle)
-        self.stations = {s: GroundStation(s, 190) for s in stations}
+        self.endpoint = Endpoint(self.vehicle, key=vehicle_key, **endpoint_options)
+        keys = keys or {}
+        self.stations = {s: GroundStation(s, 190, key=keys.get(s)) for s in stations}
+        self.intruders = [GroundStation(s, 190) for s in intruders]
         self.t = 0.0
         self.raw: list[bytes] = []  # extra bytes to inject into the vehicle next tick
         self.heard: list[bytes] = []  # every frame the vehicle sent
@@ -30,7 +37,7 @@ class Pair:
     def step(self, seconds: float = DT) -> None:
         for _ in range(max(1, int(round(seconds / DT)))):
             self.t = round(self.t + DT, 9)
-            for gs in self.stations.values():
+            for gs in [*self.stations.values(), *self.intruders]:
                 for frame in gs.tick(self.t):
                     self.endpoint.receive(frame, self.t)
             for data in self.raw:
@@ -40,7 +47,7 @@ class Pair:
             self.driver.advance(DT)
             for frame in self.endpoint.tick(self.t):
                 self.heard.append(frame)
-                for gs in self.stations.values():
+                for gs in [*self.stations.values(), *self.intruders]:
                     gs.feed(frame, self.t)
 
     def until(self, predicate, seconds: float, what: str) -> None:

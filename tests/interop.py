@@ -9,6 +9,7 @@ from collections.abc import Callable
 
 from sim.scenario import load
 from sim.serve import Server
+from vehicle.keystore import KeyStore
 
 
 def free_udp_port() -> int:
@@ -22,9 +23,13 @@ def free_udp_port() -> int:
 class ServedVehicle:
     """``returnlink sim serve`` in-process: the same Server class, a perfect link, loopback only."""
 
-    def __init__(self, scenario: str = "tunnel", gcs_port: int | None = None, speedup: float = 1.0) -> None:
+    def __init__(self, scenario: str = "tunnel", gcs_port: int | None = None, speedup: float = 1.0,
+                 key_file=None) -> None:
+        """``key_file``: start it as ``sim serve --key FILE`` would."""
         self.gcs_port = gcs_port or free_udp_port()
-        self.server = Server(load(scenario), port=0, peers=(("127.0.0.1", self.gcs_port),), perfect_link=True)
+        keystore = KeyStore.open(key_file) if key_file is not None else None
+        self.server = Server(load(scenario), port=0, peers=(("127.0.0.1", self.gcs_port),), perfect_link=True,
+                             keystore=keystore)
         self.port = self.server.address[1]
         self._stop = threading.Event()
         self.error: BaseException | None = None

@@ -136,6 +136,7 @@ class Vehicle:
         self.last_fix_t: float | None = None
         self.command_out = (0.0, 0.0)
         self.link_is_good = False  # this tick's link tag (owner heard recently, with good quality)
+        self.key_bound = False  # a signing key is installed: the root only by an explicit signed request (§4.1)
         # everything the endpoint must announce, drained by it each tick
         self.events: list[LeaseEvent] = []
         self.event_log: list[LeaseEvent] = []  # every transition since boot, for the record
@@ -168,6 +169,8 @@ class Vehicle:
 
     def admit(self, sender: int, compid: int, t: float) -> None:
         """A plain client's state-changing command may grant it the root (LEASE_AUTOGRANT)."""
+        if self.key_bound:
+            return  # with a signing key, LEASE_AUTOGRANT does nothing: the owner is bound to the key
         self._apply(self.book.admit(sender, compid, t, self.seed))
 
     def heard(self, sysid: int, t: float, seq: int | None = None) -> None:

@@ -9,12 +9,17 @@ and ``tick(t) -> [frames]`` are called by whatever loop drives the vehicle.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from enum import Enum
 from pathlib import Path
 
 from link import dialect
+from link.signing import MAX_TIMESTAMP, Key, Streams, advance, enable, sim_stamp, timestamp_of
+from link.signing import Verdict as SignVerdict
 from vehicle.app import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, Vehicle, velocity_to_command
+from vehicle.keystore import STAMP_SAVE_EVERY, KeyStore, boot_stamp
 from vehicle.lease import Check, RejectReason, Verdict
 from vehicle.missions import (
     ACCEPTED,
@@ -46,6 +51,14 @@ REJECT_RESULT = {
 }
 
 
+class Access(Enum):
+    """What a message does, for the signing gate (DESIGN §4.1)."""
+
+    READ = "read"  # asks for information: answered to anyone, signed or not
+    ACT = "act"  # changes vehicle state: with a key installed, only from frames signed with it
+    KEY = "key"  # SETUP_SIGNING: judges its own signature and always answers why
+
+
 class _Sink:
     """The file pymavlink's encoder writes finished frames to."""
 
@@ -72,13 +85,17 @@ class Counters:
     commands: int = 0
     command_retries: int = 0
     unsupported: int = 0
+    signing: Counter = field(default_factory=Counter)  # frames per signing Verdict, with a key installed
 
 
 class Endpoint:
     """MAVLink in, MAVLink out, for one ``Vehicle``."""
 
     def __init__(self, vehicle: Vehicle, sysid: int = 1, compid: int = 1, origin: Origin | None = None,
-                 boot_t: float = 0.0, param_file: Path | None = None) -> None:
+                 boot_t: float = 0.0, param_file: Path | None = None, *, key: Key | None = None,
+                 keystore: KeyStore | None = None, stamp: Callable[[float], int] = sim_stamp) -> None:
+        """``key`` (or ``keystore``, which also keeps the key and the signing timestamp on disk) turns signing on;
+        ``stamp(t)`` is the signing clock in 10 µs units since 2015 (the wall clock on a real vehicle)."""
         self.vehicle = vehicle
         self.sysid, self.compid = sysid, compid
         self.origin = origin or Origin()
@@ -96,6 +113,66 @@ class Endpoint:
         self.telemetry = Telemetry(self.mav, vehicle, self.origin, boot_t,
                                    lambda: (self.counters.frames, self.counters.bad_frames),
                                    lambda: len(self.missions.lists[0]))
+        # signing (DESIGN §4.1): None until a key is installed
+        self.stamp = stamp
+        self.key: Key | None = None
+        self.keystore = keystore
+        self.streams = Streams()
+        self.trusted = True  # the frame being handled is signed with the key, or no key is installed
+        self.stamp_saved_at = boot_t
+        self.refused_since_notice = 0
+        if keystore is not None:
+            self.install_key(keystore.key, boot_stamp(keystore.saved_stamp, stamp(boot_t)))
+        elif key is not None:
+            self.install_key(key, stamp(boot_t))
+
+    # ----- signing ---------------------------------------------------------------------------------------------
+    def install_key(self, key: Key, timestamp: int) -> None:
+        """Sign everything sent from now on and accept state changes only from frames signed with ``key``."""
+        self.key = key
+        enable(self.mav, key, timestamp)
+        self.vehicle.key_bound = True
+
+    def signing_timestamp(self, t: float) -> int:
+        """Our signing timestamp at ``t``: the clock, or further on if we already used (or accepted) later."""
+        return advance(self.mav, self.stamp(t)) if self.key is not None else 0
+
+    def save_stamp(self, t: float) -> None:
+        """Persist the signing timestamp (every STAMP_SAVE_EVERY s and at shutdown) so a reboot never reuses one."""
+        if self.keystore is None or self.key is None:
+            return
+        self.stamp_saved_at = t
+        try:
+            self.keystore.save_stamp(self.signing_timestamp(t))
+        except OSError as e:
+            self.statustext(f"signing timestamp not saved: {e.strerror or e}", mav.MAV_SEVERITY_ERROR)
+
+    def close(self, t: float | None = None) -> None:
+        """Shutdown: the last signing timestamp goes to disk."""
+        self.save_stamp(self.vehicle.t if t is None else t)
+
+    def _judge(self, m, t: float) -> SignVerdict:
+        frame = bytes(m.get_msgbuf())
+        self.streams, verdict = self.streams.verify(self.key, frame, self.signing_timestamp(t))
+        if verdict is SignVerdict.ACCEPT:
+            advance(self.mav, timestamp_of(frame) or 0)  # the spec: continue from the newest timestamp accepted
+        self.counters.signing[verdict] += 1
+        return verdict
+
+    def _refuse(self, m, verdict: SignVerdict, sender: int, t: float) -> None:
+        """A state change that is not signed with the key: dropped, counted, announced at most every few seconds.
+
+        No COMMAND_ACK or MISSION_ACK answers it: a forged frame carrying the owner's sysid would otherwise make the
+        vehicle answer the owner's own pending command with a refusal."""
+        self.vehicle.commands_rejected += 1
+        self.refused_since_notice += 1
+        if t - self.notice_at.get((0, "signing"), -math.inf) < REJECT_NOTICE_GAP:
+            return
+        self.notice_at[(0, "signing")] = t
+        more = self.refused_since_notice - 1
+        self.refused_since_notice = 0
+        self.statustext(f"{verdict.value} {m.get_type()} from {sender} refused"
+                        + (f" (+{more} more since the last notice)" if more else ""), mav.MAV_SEVERITY_WARNING)
 
     # ----- output --------------------------------------------------------------------------------------------
     def _send(self, name: str, **fields) -> None:
@@ -138,7 +215,15 @@ class Endpoint:
         if not self._for_us(m):
             self.counters.wrong_target += 1
             return
-        self.vehicle.heard(sender, t, m.get_seq())
+        self.trusted = True
+        if self.key is not None:
+            verdict = self._judge(m, t)
+            self.trusted = verdict is SignVerdict.ACCEPT
+            if not self.trusted and access(m) is Access.ACT:
+                self._refuse(m, verdict, sender, t)
+                return
+        if self.trusted:  # an unsigned frame never counts as the owner heard: forged heartbeats keep nothing alive
+            self.vehicle.heard(sender, t, m.get_seq())
         handler = getattr(self, f"_on_{m.get_type().lower()}", None)
         if handler is None:
             return
@@ -399,7 +484,39 @@ class Endpoint:
             self.statustext(why, mav.MAV_SEVERITY_WARNING)
 
     def _on_mission_ack(self, m, sender, scomp, t):
-        self.missions.on_ack(sender, getattr(m, "mission_type", 0))
+        if self.trusted:  # it ends a download for anyone, but only a trusted one may cancel an upload
+            self.missions.on_ack(sender, getattr(m, "mission_type", 0))
+
+    # ----- signing ------------------------------------------------------------------------------------------
+    def _on_setup_signing(self, m, sender, scomp, t):
+        """Key rotation, only over a link already signed with the installed key; answered either way."""
+        if self.key is None:
+            self.statustext("signing setup refused: no key installed (a key is never installed over the link; "
+                            "start the vehicle with --key FILE)", mav.MAV_SEVERITY_WARNING)
+            return
+        if not self.trusted:
+            self.statustext(f"signing setup from {sender} refused: not signed with the installed key",
+                            mav.MAV_SEVERITY_WARNING)
+            return
+        secret = bytes(bytearray(m.secret_key))
+        if len(secret) != 32 or not any(secret):
+            self.statustext("signing setup refused: signing cannot be switched off over the link",
+                            mav.MAV_SEVERITY_WARNING)
+            return
+        if not 0 <= m.initial_timestamp <= MAX_TIMESTAMP:
+            self.statustext("signing setup refused: initial timestamp outside 48 bits", mav.MAV_SEVERITY_WARNING)
+            return
+        key = Key(secret)
+        if self.keystore is not None:
+            try:
+                self.keystore.save_key(key)
+            except OSError as e:
+                self.statustext(f"signing setup failed, key kept: cannot save the new key ({e.strerror or e})",
+                                mav.MAV_SEVERITY_ERROR)
+                return
+        self.install_key(key, max(self.signing_timestamp(t), int(m.initial_timestamp)))
+        self.save_stamp(t)
+        self.statustext(f"signing key changed by GCS {sender} (key id {key.fingerprint})", mav.MAV_SEVERITY_NOTICE)
 
     def _on_mission_set_current(self, m, sender, scomp, t):
         error = self.vehicle.set_plan_start(m.seq, sender, scomp, t)
@@ -469,6 +586,10 @@ class Endpoint:
         why = self.missions.tick(t)
         if why:
             self.statustext(why, mav.MAV_SEVERITY_WARNING)
+        if self.key is not None:
+            self.signing_timestamp(t)
+            if t - self.stamp_saved_at >= STAMP_SAVE_EVERY:
+                self.save_stamp(t)
         self.telemetry.tick(t)
         frames = self._sink.frames
         self._sink.frames = []
@@ -490,6 +611,30 @@ COMMANDS: dict[int, Callable[..., tuple[int, int]]] = {
     mav.MAV_CMD_LEASE_EXPIRE: Endpoint._cmd_lease_expire,
     mav.MAV_CMD_DO_SET_MISSION_CURRENT: Endpoint._cmd_mission_current,
 }
+
+
+# The signing gate's one table (DESIGN §4.1): what each message does, messages by name and commands (COMMAND_LONG
+# and COMMAND_INT) by id. Anything not listed acts. With a key installed an unsigned station can watch, never act.
+ACCESS: dict[str | int, Access] = {
+    "HEARTBEAT": Access.READ,  # peer discovery; an unsigned one is never "the owner heard"
+    "PARAM_REQUEST_LIST": Access.READ,
+    "PARAM_REQUEST_READ": Access.READ,
+    "MISSION_REQUEST_LIST": Access.READ,
+    "MISSION_REQUEST_INT": Access.READ,
+    "MISSION_REQUEST": Access.READ,
+    "MISSION_ACK": Access.READ,  # ends a download; cancels an upload only when trusted (_on_mission_ack)
+    "SETUP_SIGNING": Access.KEY,
+    mav.MAV_CMD_REQUEST_MESSAGE: Access.READ,  # one message, once (a stream is SET_MESSAGE_INTERVAL: acts)
+    mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: Access.READ,
+    mav.MAV_CMD_GET_HOME_POSITION: Access.READ,
+}
+
+
+def access(m) -> Access:
+    kind = m.get_type()
+    if kind in ("COMMAND_LONG", "COMMAND_INT"):
+        return ACCESS.get(m.command, Access.ACT)
+    return ACCESS.get(kind, Access.ACT)
 
 
 def _whole(x: float) -> int | None:
