@@ -181,9 +181,9 @@ class Vehicle:
             self.last_good_packet = t
 
     def acquire(self, sender: int, compid: int, t: float, allow_takeover: bool) -> Check:
-        if not self.book.may_take(sender, t):
-            return self._reject(Check(Verdict.REJECT, None, RejectReason.NOT_IN_CONTROL,
-                                      f"owned by GCS {self.book.owner}; takeover not allowed"))
+        why = self.book.take_refusal(sender, t)
+        if why is not None:
+            return self._reject(Check(Verdict.REJECT, None, RejectReason.NOT_IN_CONTROL, why))
         if self.book.owner == sender:
             self.book = replace(self.book, takeover_allowed=allow_takeover)
             return Check(Verdict.EXECUTE, self.book.current_id)
