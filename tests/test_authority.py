@@ -48,3 +48,31 @@ def test_a_stale_owner_is_not_taken_over_while_its_return_runs():
     pair.until(lambda: take.done, 2, "ACK")
     assert take.ok and pair.vehicle.book.owner == STRANGER and pair.vehicle.book.epoch != epoch
     assert owner.sysid == OWNER
+
+
+def _command_frame(command: int, *params: float, sysid: int = OWNER, confirmation: int = 0) -> bytes:
+    enc = mav.MAVLink(None, sysid, 190)
+    p7 = tuple(params) + (0.0,) * (7 - len(params))
+    return enc.command_long_encode(1, 1, command, confirmation, *p7).pack(enc)
+
+
+def test_a_late_copy_of_rtl_after_a_newer_command_is_answered_but_never_runs_again():
+    """Mode RTL, then mode HOLD (the same command id, newer), then a late copy of the RTL: the copy gets the
+    first answer and the lease is not expired a second time."""
+    pair = owned(Pair(stations=(OWNER,)))
+    pair.stations[OWNER].drive_velocity(1.0, 0.0)
+    pair.step(5.0)
+    pair.stations[OWNER].stop_streaming()
+    rtl = _command_frame(mav.MAV_CMD_DO_SET_MODE, 1, 4, 5)
+    hold = _command_frame(mav.MAV_CMD_DO_SET_MODE, 1, 4, 3)
+    acks: list[int] = []
+    pair.stations[OWNER].listeners.append(
+        lambda m, t: acks.append(m.result) if m.get_type() == "COMMAND_ACK" and m.command == 176 else None)
+    for frame in (rtl, hold, rtl):
+        pair.raw.append(frame)
+        pair.step(0.5)
+    expires = [e for e in pair.vehicle.event_log if e.reason.name == "OPERATOR_EXPIRE"]
+    assert len(expires) == 1
+    assert acks == [mav.MAV_RESULT_ACCEPTED] * 3
+    assert pair.vehicle.state() == State.TELEOP  # HOLD took the vehicle back and the old RTL did not undo it
+    assert pair.endpoint.counters.command_retries == 1

@@ -30,12 +30,13 @@ from vehicle.missions import (
 )
 from vehicle.modes import decode_mode
 from vehicle.params import SPECS, ParamError, format_parm
+from vehicle.retries import RetryWindow, command_key
 from vehicle.service import NAV_RETURN_TO_LINK, PlanItem
 from vehicle.telemetry import Telemetry, wire_index
 
 mav = dialect.load()
 
-RETRY_WINDOW = 3.0  # s: an identical command from the same sender within this is a retry, not a new command
+RETRY_WINDOW = 3.0  # s: an identical command from the same sender within this is a retry or a late copy
 REJECT_NOTICE_GAP = 2.0  # s between STATUSTEXTs about a rejected stream (MANUAL_CONTROL, velocity targets)
 
 REJECT_RESULT = {
@@ -54,14 +55,6 @@ class _Sink:
 
     def write(self, data: bytes) -> None:
         self.frames.append(bytes(data))
-
-
-@dataclass
-class _Answered:
-    key: tuple
-    at: float
-    result: int
-    param2: int
 
 
 @dataclass
@@ -89,7 +82,7 @@ class Endpoint:
         self.parser = mav.MAVLink(None, 0, 0)
         self.parser.robust_parsing = True
         self.counters = Counters()
-        self.answered: dict[tuple[int, int, int], _Answered] = {}
+        self.answered = RetryWindow(RETRY_WINDOW)
         self.notice_at: dict[tuple[int, str], float] = {}
         self.statustext_id = 0
         self.missions = MissionServer(self._send, self._accept_mission)
@@ -166,13 +159,12 @@ class Endpoint:
         self._command(m.command, params, sender, scomp, t)
 
     def _command(self, command: int, p: tuple, sender: int, scomp: int, t: float) -> None:
-        """Exactly one COMMAND_ACK per command message; a retry repeats the first answer without re-executing."""
-        key = (command, *[round(x, 6) if math.isfinite(x) else str(x) for x in p])
-        slot = (sender, scomp, command)
-        prev = self.answered.get(slot)
-        if prev is not None and prev.key == key and t - prev.at <= RETRY_WINDOW:
+        """Exactly one COMMAND_ACK per command message; a retry or a late copy of any command of the last
+        RETRY_WINDOW seconds repeats the first answer and is never executed again (DESIGN §3.9)."""
+        key = command_key(sender, scomp, command, p)
+        prev = self.answered.seen(key, t)
+        if prev is not None:
             self.counters.command_retries += 1
-            prev.at = t
             self._ack(command, prev.result, prev.param2, sender, scomp)
             return
         self.counters.commands += 1
@@ -186,10 +178,7 @@ class Endpoint:
             except (ValueError, OverflowError) as e:  # NaN or infinity where a number is needed
                 self.statustext(f"command {command} refused: {e}", mav.MAV_SEVERITY_WARNING)
                 result, param2 = mav.MAV_RESULT_DENIED, 0
-        self.answered[slot] = _Answered(key, t, result, param2)
-        if len(self.answered) > 256:
-            for k in sorted(self.answered, key=lambda k: self.answered[k].at)[:128]:
-                del self.answered[k]
+        self.answered.remember(key, result, param2, t)
         self._ack(command, result, param2, sender, scomp)
 
     def _ack(self, command: int, result: int, param2: int, sender: int, scomp: int) -> None:
