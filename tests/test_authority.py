@@ -76,3 +76,31 @@ def test_a_late_copy_of_rtl_after_a_newer_command_is_answered_but_never_runs_aga
     assert acks == [mav.MAV_RESULT_ACCEPTED] * 3
     assert pair.vehicle.state() == State.TELEOP  # HOLD took the vehicle back and the old RTL did not undo it
     assert pair.endpoint.counters.command_retries == 1
+
+
+def _count(pair: Pair, name: str, seconds: float) -> int:
+    pair.heard.clear()
+    pair.step(seconds)
+    return sum(1 for f in pair.heard if pair.endpoint.parser.parse_buffer(f)[0].get_type() == name)
+
+
+def test_a_stranger_cannot_change_telemetry_rates_of_an_owned_vehicle_but_may_read():
+    pair = owned(Pair(stations=(OWNER, STRANGER)))
+    gs, owner = pair.stations[STRANGER], pair.stations[OWNER]
+    before = _count(pair, "LEASE_STATUS", 4.0), _count(pair, "ATTITUDE", 2.0)
+    slow = gs.command(mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAVLINK_MSG_ID_LEASE_STATUS, 3_333_333)
+    pair.step(0.1)
+    fast = gs.command(mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAVLINK_MSG_ID_ATTITUDE, 19_230)
+    pair.step(0.1)
+    assert slow.result == mav.MAV_RESULT_DENIED and fast.result == mav.MAV_RESULT_DENIED
+    assert sum("message interval from 245 refused" in text for text in texts(pair, STRANGER)) == 2
+    after = _count(pair, "LEASE_STATUS", 4.0), _count(pair, "ATTITUDE", 2.0)
+    assert after == before and after[0] >= 8  # still 2 Hz for everyone
+    got = []
+    gs.listeners.append(lambda m, t: got.append(m) if m.get_type() == "AUTOPILOT_VERSION" else None)
+    read = gs.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+    pair.step(0.1)
+    assert read.ok and got  # a single message is a read: answered to anyone
+    mine = owner.command(mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAVLINK_MSG_ID_ATTITUDE, 100_000)
+    pair.step(0.1)
+    assert mine.ok and 9 <= _count(pair, "ATTITUDE", 1.0) <= 11  # the owner may

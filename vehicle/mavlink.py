@@ -230,6 +230,7 @@ class Endpoint:
         return self._verdict(chk, f"mode {mode}", sender)
 
     def _cmd_request_message(self, p, sender, scomp, t):
+        """One message, once: a read, answered to anyone (it starts no stream here)."""
         msgid = int(p[0])
         if not self.telemetry.emit(msgid, t):
             return mav.MAV_RESULT_DENIED, 0
@@ -244,6 +245,12 @@ class Endpoint:
         return mav.MAV_RESULT_ACCEPTED, 0
 
     def _cmd_message_interval(self, p, sender, scomp, t):
+        """Telemetry rates are vehicle state shared by every station (DESIGN §3.9): only the owner changes
+        them; with nobody owning, any plain client may (MAVSDK and MAVProxy set intervals when they connect)."""
+        if self.vehicle.refuses(sender):
+            self.statustext(f"message interval from {sender} refused: GCS {self.vehicle.book.owner} is in control",
+                            mav.MAV_SEVERITY_WARNING)
+            return mav.MAV_RESULT_DENIED, 0
         if not self.telemetry.set_interval(int(p[0]), p[1], t):
             return mav.MAV_RESULT_DENIED, 0
         return mav.MAV_RESULT_ACCEPTED, 0
