@@ -69,6 +69,7 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from sim.serve import Server
+    from vehicle.storage import StoredFileError
 
     sc = _scenario(args.scenario)
     if args.speedup <= 0:
@@ -78,6 +79,9 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
     try:
         server = Server(sc, args.vehicle, args.seed, args.port, peers, args.perfect_link,
                         Path(args.params) if args.params else None)
+    except StoredFileError as e:  # a damaged kept file: refuse to start rather than boot on defaults
+        print(f"returnlink: error: {e}", file=sys.stderr)
+        return 2
     except OSError as e:
         print(f"returnlink: error: cannot bind 127.0.0.1:{args.port}: {e}", file=sys.stderr)
         return 2

@@ -29,7 +29,7 @@ from vehicle.missions import (
     to_plan,
 )
 from vehicle.modes import decode_mode
-from vehicle.params import SPECS, ParamError, format_parm
+from vehicle.params import SPECS, ParamError, save_parm
 from vehicle.retries import RetryWindow, command_key
 from vehicle.service import NAV_RETURN_TO_LINK, PlanItem
 from vehicle.telemetry import Telemetry, wire_index
@@ -438,9 +438,11 @@ class Endpoint:
             try:
                 self.vehicle.set_param(name, float(m.param_value))
                 if self.param_file is not None:
-                    self.param_file.write_text(format_parm(self.vehicle.params.values), encoding="utf-8")
+                    save_parm(self.param_file, self.vehicle.params.values)
             except ParamError as e:
                 self.statustext(f"param set refused: {e}", mav.MAV_SEVERITY_WARNING)
+            except OSError as e:  # in use until the next boot, which will not know it: say so
+                self.statustext(f"param {name} set but not saved: {e.strerror or e}", mav.MAV_SEVERITY_ERROR)
         self._param_value(names.index(name))
 
     # ----- telemetry ----------------------------------------------------------------------------------------
