@@ -65,6 +65,20 @@ def _address(text: str) -> tuple[str, int]:
         raise argparse.ArgumentTypeError(f"{text!r} is not HOST:PORT") from None
 
 
+def _epochs_file(args: argparse.Namespace):
+    """Where `sim serve` keeps the epochs it issued: ``--state DIR``, else beside ``--params FILE``, else the
+    user's state directory ($XDG_STATE_HOME/returnlink, by default ~/.local/state/returnlink)."""
+    import os
+    from pathlib import Path
+
+    if args.state:
+        return Path(args.state) / "returnlink.epochs"
+    if args.params:
+        return Path(args.params).with_suffix(".epochs")
+    base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
+    return Path(base) / "returnlink" / "returnlink.epochs"
+
+
 def _cmd_sim_serve(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -76,9 +90,16 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
         print("returnlink: error: --speedup must be positive", file=sys.stderr)
         return 2
     peers = tuple(args.peer) if args.peer else (("127.0.0.1", 14550), ("127.0.0.1", 14540))
+    epochs = _epochs_file(args)
+    try:
+        epochs.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        print(f"returnlink: error: cannot create the state directory {epochs.parent}: {e.strerror or e}",
+              file=sys.stderr)
+        return 2
     try:
         server = Server(sc, args.vehicle, args.seed, args.port, peers, args.perfect_link,
-                        Path(args.params) if args.params else None)
+                        Path(args.params) if args.params else None, epochs)
     except StoredFileError as e:  # a damaged kept file: refuse to start rather than boot on defaults
         print(f"returnlink: error: {e}", file=sys.stderr)
         return 2
@@ -133,6 +154,8 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--perfect-link", action="store_true", help="no radio model: every packet arrives")
     serve.add_argument("--duration", type=float, default=float("inf"), help="stop after this many simulated s")
     serve.add_argument("--params", help=".parm file to boot from and save parameter changes to")
+    serve.add_argument("--state", help="directory for the epochs kept across restarts (default: beside --params, "
+                                       "else $XDG_STATE_HOME/returnlink)")
     serve.add_argument("--out", help="where to write the plot on exit")
     serve.set_defaults(func=_cmd_sim_serve)
     from gcs import cli as gcs_cli

@@ -45,13 +45,14 @@ class SimDriver:
         return self.robot.pose
 
 
-def simulated_vehicle(scenario: Scenario, kind: str, seed: int,
-                      param_file: Path | None = None) -> tuple[SimDriver, Vehicle, Endpoint]:
+def simulated_vehicle(scenario: Scenario, kind: str, seed: int, param_file: Path | None = None,
+                      boot_epoch: int | None = None) -> tuple[SimDriver, Vehicle, Endpoint]:
     """The scenario's robot with the real onboard software on it: boot parameters from ``param_file`` (or the
-    defaults), then the scenario's own, as `sim run` and `sim serve` both start it."""
+    defaults; StoredFileError if it is damaged), then the scenario's own, as `sim run` and `sim serve` both start
+    it. ``boot_epoch`` None (`sim run`) derives the first epoch from ``seed``; `sim serve` draws one."""
     driver = SimDriver(scenario, kind, np.random.default_rng(seed))
     params = load_defaults(param_file) if param_file is not None and param_file.is_file() else load_defaults()
     for k, v in scenario.params.items():
         params.set(k, v)
-    vehicle = Vehicle(driver, params, scenario.start, 0.0, seed=seed)
+    vehicle = Vehicle(driver, params, scenario.start, 0.0, seed=seed, boot_epoch=boot_epoch)
     return driver, vehicle, Endpoint(vehicle, param_file=param_file)

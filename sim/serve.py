@@ -19,16 +19,22 @@ from sim.driver import simulated_vehicle
 from sim.plots import draw_trail, draw_world, plt, save
 from sim.scenario import Scenario
 from vehicle.app import DT, run
+from vehicle.epochs import EpochLog
 
 
 class Server:
     def __init__(self, scenario: Scenario, vehicle: str | None = None, seed: int | None = None,
                  port: int = 14580, peers: tuple[tuple[str, int], ...] = (("127.0.0.1", 14550), ("127.0.0.1", 14540)),
-                 perfect_link: bool = False, param_file: Path | None = None) -> None:
+                 perfect_link: bool = False, param_file: Path | None = None, epochs_file: Path | None = None) -> None:
+        """``epochs_file``: where the epochs this vehicle issues are kept across restarts (DESIGN §3.1); the boot
+        epoch is drawn from the OS random source either way, never from ``seed``."""
         sc = self.scenario = scenario
         self.kind = vehicle or sc.vehicle
         self.seed = sc.seed if seed is None else seed
-        self.driver, self.vehicle, self.endpoint = simulated_vehicle(sc, self.kind, self.seed, param_file)
+        self.epochs = EpochLog(epochs_file)
+        self.driver, self.vehicle, self.endpoint = simulated_vehicle(sc, self.kind, self.seed, param_file,
+                                                                     self.epochs.boot)
+        self.vehicle.on_epoch = self.epochs.issued
         self.transport = UdpTransport(("127.0.0.1", port), peers)
         station = sc.station(sc.operator_station)
         radio = None if perfect_link else Radio(sc.radio, self.driver.world.attenuation_db, self.seed + 1)

@@ -28,6 +28,7 @@ from vehicle.lease import (
     QueuedCommand,
     RejectReason,
     Verdict,
+    epoch_before,
 )
 from vehicle.params import Params
 from vehicle.returning import LINK_TAG_LAG_S
@@ -111,15 +112,19 @@ class Vehicle:
     """The onboard state machine around the pure parts. Mutable: it is the shell that owns the current book."""
 
     def __init__(self, driver: RobotDriver, params: Params, pose: tuple[float, float, float], t: float = 0.0,
-                 seed: int = 0) -> None:
+                 seed: int = 0, boot_epoch: int | None = None) -> None:
+        """``boot_epoch``: the first epoch to issue, drawn at boot by a real-time vehicle (``vehicle.epochs``);
+        None derives it from ``seed``, as only the lockstep simulator may (DESIGN §3.1)."""
         self.driver = driver
         self.params = params
         self.seed = seed
+        self.on_epoch: Callable[[int], str | None] | None = None  # told of each epoch issued, before its ACK
         x, y, yaw = pose
         self.home = (x, y)
         self.estimator = Estimator(x, y, yaw, t, pos_std=0.3, yaw_std=0.02)
         self.trail = Trail(trail_config(params))
-        self.book = LeaseBook(lease_config(params), plan=default_plan(params))
+        self.book = LeaseBook(lease_config(params), plan=default_plan(params),
+                              last_epoch=None if boot_epoch is None else epoch_before(boot_epoch))
         self.plan_items: tuple[PlanItem, ...] = ()  # the uploaded return plan (empty: the default plan)
         self.t = t
         self.armed = False
@@ -147,7 +152,12 @@ class Vehicle:
 
     # ----- lease transitions -------------------------------------------------------------------------------
     def _apply(self, out: Outcome) -> None:
+        issued = out.book.last_epoch != self.book.last_epoch
         self.book = out.book
+        if issued and self.on_epoch is not None and out.book.last_epoch is not None:
+            problem = self.on_epoch(out.book.last_epoch)  # kept before anyone hears of the new epoch
+            if problem:
+                self.notices.append(problem)
         self.events.extend(out.events)
         self.event_log.extend(out.events)
         for ev in out.events:

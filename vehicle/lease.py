@@ -220,6 +220,14 @@ def _epoch_after(previous: int | None, seed: int) -> int:
     return previous % 0xFFFF + 1
 
 
+def epoch_before(epoch: int) -> int:
+    """The ``last_epoch`` a book must start from for its first root to get ``epoch`` (a real-time vehicle's boot
+    epoch, drawn from the OS random source by ``vehicle.epochs``)."""
+    if not 1 <= epoch <= 0xFFFF:
+        raise ValueError(f"epoch {epoch} outside 1..65535")
+    return (epoch - 2) % 0xFFFF + 1
+
+
 @dataclass(frozen=True)
 class LeaseBook:
     """The whole lease state of one vehicle. Immutable; every method returns a new book."""
