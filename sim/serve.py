@@ -35,7 +35,7 @@ class Server:
         self.driver, self.vehicle, self.endpoint = simulated_vehicle(sc, self.kind, self.seed, param_file,
                                                                      self.epochs.boot)
         self.vehicle.on_epoch = self.epochs.issued
-        self.transport = UdpTransport(("127.0.0.1", port), peers)
+        self.transport = UdpTransport(("127.0.0.1", port), peers, pinned=self.endpoint.pinned)
         station = sc.station(sc.operator_station)
         radio = None if perfect_link else Radio(sc.radio, self.driver.world.attenuation_db, self.seed + 1)
         self.proxy = RadioProxy(self.transport, radio, (station.x, station.y), station.power_dbm,
@@ -47,7 +47,7 @@ class Server:
     def address(self) -> tuple[str, int]:
         return self.transport.address
 
-    def _receive(self, t: float) -> list[bytes]:
+    def _receive(self, t: float) -> list[tuple[bytes, tuple[str, int]]]:
         self.proxy.flush(t)
         return self.proxy.from_ground(t)
 

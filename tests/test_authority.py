@@ -104,3 +104,62 @@ def test_a_stranger_cannot_change_telemetry_rates_of_an_owned_vehicle_but_may_re
     mine = owner.command(mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAVLINK_MSG_ID_ATTITUDE, 100_000)
     pair.step(0.1)
     assert mine.ok and 9 <= _count(pair, "ATTITUDE", 1.0) <= 11  # the owner may
+
+
+def test_strangers_cycling_source_ports_do_not_starve_the_owners_downlink():
+    """`sim serve` on loopback: the owner acquires, then 20 strangers send from 20 source ports in turn. The owner
+    keeps receiving the whole downlink: as many frames as the fixed peer, which nobody can evict."""
+    import socket
+    import time
+
+    from link.transports import UdpTransport
+    from tests.interop import ServedVehicle, wait_until
+
+    fixed = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    fixed.bind(("127.0.0.1", 0))
+    fixed.setblocking(False)
+    served = ServedVehicle("open", gcs_port=fixed.getsockname()[1])
+    owner = UdpTransport(("127.0.0.1", 0))
+    strangers = [UdpTransport(("127.0.0.1", 0)) for _ in range(20)]
+    vehicle = ("127.0.0.1", served.port)
+    enc = mav.MAVLink(None, 200, 190)
+    try:
+        heartbeat = enc.heartbeat_encode(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(enc)
+        owner.send(enc.command_long_encode(1, 1, mav.MAV_CMD_REQUEST_OPERATOR_CONTROL, 0, 1, 0, 10, 0, 0, 0, 0)
+                   .pack(enc), vehicle)
+        wait_until(lambda: served.vehicle.book.owner == 200, 10, "the owner's acquire")
+        wait_until(lambda: served.server.endpoint.pinned() == [owner.address], 5, "the owner's address pinned")
+        other = mav.MAVLink(None, 100, 190)
+        stranger_hb = other.heartbeat_encode(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(other)
+        for s in strangers:  # fill the table with strangers before counting
+            s.send(stranger_hb, vehicle)
+        time.sleep(0.3)
+        owner.receive(), _drain(fixed)
+        got_owner = got_fixed = 0
+        for k in range(120):  # about 1.8 s: a stranger every 15 ms, the owner's heartbeat once a second
+            strangers[k % len(strangers)].send(stranger_hb, vehicle)
+            if k % 66 == 0:
+                owner.send(heartbeat, vehicle)
+            time.sleep(0.015)
+            got_owner += len(owner.receive())
+            got_fixed += _drain(fixed)
+        time.sleep(0.2)
+        got_owner += len(owner.receive())
+        got_fixed += _drain(fixed)
+        assert served.vehicle.book.owner == 200
+        assert got_fixed > 20 and got_owner >= 0.9 * got_fixed, (got_owner, got_fixed)
+    finally:
+        for t in (owner, *strangers):
+            t.close()
+        fixed.close()
+        served.close()
+
+
+def _drain(sock) -> int:
+    n = 0
+    while True:
+        try:
+            sock.recvfrom(65535)
+        except BlockingIOError:
+            return n
+        n += 1

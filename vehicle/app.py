@@ -452,12 +452,13 @@ def velocity_to_command(vn: float, ve: float, yaw_rate: float | None, yaw: float
     return speed * max(0.0, math.cos(err)), turn
 
 
-def run(vehicle: Vehicle, endpoint, receive: Callable[[float], list[bytes]], send: Callable[[bytes, float], None],
+def run(vehicle: Vehicle, endpoint, receive: Callable[[float], list], send: Callable[[bytes, float], None],
         clock: Callable[[], float] = time.monotonic, stop: Callable[[], bool] = lambda: False,
         sleep: Callable[[float], None] = time.sleep, speedup: float = 1.0,
         after_tick: Callable[[float], None] | None = None) -> None:
     """The real-time shell around one vehicle: 50 Hz ticks paced by ``clock`` (``speedup`` times faster),
-    frames in through ``receive(t)`` and out through ``send(frame, t)``, until ``stop()``.
+    frames in through ``receive(t)`` (bytes, or (bytes, source address)) and out through ``send(frame, t)``,
+    until ``stop()``.
 
     A real robot passes a UDP or serial link and its driver; the simulator passes the radio proxy and steps the
     physics in ``after_tick``.
@@ -465,8 +466,11 @@ def run(vehicle: Vehicle, endpoint, receive: Callable[[float], list[bytes]], sen
     t0, start = clock(), vehicle.t
     while not stop():
         t = round(vehicle.t + DT, 9)
-        for data in receive(t):
-            endpoint.receive(data, t)
+        for item in receive(t):
+            if isinstance(item, tuple):  # (bytes, where they came from): the endpoint learns its owner's address
+                endpoint.receive(item[0], t, item[1])
+            else:
+                endpoint.receive(item, t)
         vehicle.tick(t)
         if after_tick is not None:
             after_tick(t)

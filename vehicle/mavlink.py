@@ -9,7 +9,7 @@ and ``tick(t) -> [frames]`` are called by whatever loop drives the vehicle.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -84,6 +84,8 @@ class Endpoint:
         self.counters = Counters()
         self.answered = RetryWindow(RETRY_WINDOW)
         self.notice_at: dict[tuple[int, str], float] = {}
+        self.sources: dict[int, Hashable] = {}  # sysid -> where its last frame came from
+        self._source: Hashable | None = None
         self.statustext_id = 0
         self.missions = MissionServer(self._send, self._accept_mission)
         self.telemetry = Telemetry(self.mav, vehicle, self.origin, boot_t,
@@ -108,8 +110,10 @@ class Endpoint:
             self.mav.statustext_send(severity, b"", id=self.statustext_id, chunk_seq=len(chunks))
 
     # ----- input ---------------------------------------------------------------------------------------------
-    def receive(self, data: bytes, t: float) -> None:
-        """Parse and handle whatever frames ``data`` holds; garbage is counted and dropped."""
+    def receive(self, data: bytes, t: float, source: Hashable | None = None) -> None:
+        """Parse and handle whatever frames ``data`` holds; garbage is counted and dropped. ``source`` (a UDP
+        address, opaque here) is remembered per sender, so the transport can keep the owner's (``pinned``)."""
+        self._source = source
         try:
             msgs = self.parser.parse_buffer(data) or []
         except Exception:  # noqa: BLE001 - a hostile byte stream must never take the vehicle down
@@ -128,6 +132,8 @@ class Endpoint:
         if sender == self.sysid or sender == 0:
             return  # our own frames echoed back, or an anonymous sender
         self.counters.frames += 1
+        if self._source is not None:
+            self.sources[sender] = self._source  # at most 255 senders
         if not self._for_us(m):
             self.counters.wrong_target += 1
             return
@@ -141,6 +147,12 @@ class Endpoint:
             # a well-framed message with absurd content: refuse it, keep running, keep state
             self.counters.bad_frames += 1
             self.statustext(f"ignored {m.get_type()}: {e}", mav.MAV_SEVERITY_WARNING)
+
+    def pinned(self) -> list[Hashable]:
+        """Addresses the transport must never drop from its peer table: the owner's (DESIGN §3.9)."""
+        owner = self.vehicle.book.owner
+        where = None if owner is None else self.sources.get(owner)
+        return [] if where is None else [where]
 
     def _for_us(self, m) -> bool:
         ts = getattr(m, "target_system", None)
