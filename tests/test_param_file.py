@@ -13,7 +13,7 @@ import pytest
 
 from sim.cli import main
 from vehicle.params import SPECS, read_parm_file
-from vehicle.storage import StoredFileError
+from vehicle.storage import StoredFileError, remove_leftovers
 
 # Saves the parameter file as the endpoint does on every accepted PARAM_SET, as fast as it can, alternating
 # two values; prints "saved" once the first save is on disk.
@@ -57,6 +57,8 @@ def test_sigkill_during_saves_always_leaves_a_complete_parm_file(tmp_path):
             proc.kill()  # SIGKILL, this process only
             proc.wait(5)
         _complete(path)
+    remove_leftovers(path)  # what a boot does first: a crash mid-write left at most an orphan temporary
+    assert [p.name for p in tmp_path.iterdir()] == ["vehicle.parm"]
 
 
 def test_a_reader_during_saves_never_sees_a_partial_file(tmp_path):
@@ -88,3 +90,11 @@ def test_a_damaged_parm_file_is_refused_at_boot_by_name_and_line(tmp_path, capsy
     err = capsys.readouterr().err
     assert code == 2 and f"vehicle.parm:{line}: " in err and what in err
     assert path.read_text() == text  # left as found, for whoever investigates
+
+
+def test_boot_removes_only_the_orphans_of_its_own_file(tmp_path):
+    (tmp_path / ".vehicle.parm.k3j2.tmp").write_text("LNK_TIM")  # a save cut short by a crash
+    (tmp_path / ".other.parm.k3j2.tmp").write_text("x")
+    (tmp_path / "vehicle.parm").write_text("LNK_TIMEOUT 4\n")
+    assert remove_leftovers(tmp_path / "vehicle.parm") == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".other.parm.k3j2.tmp", "vehicle.parm"]

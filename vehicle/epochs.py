@@ -19,7 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from vehicle.storage import StoredFileError, read_text, write_atomic
+from vehicle.storage import StoredFileError, read_text, remove_leftovers, write_atomic
 
 SPACE = 0xFFFF  # epochs are 1..65535 and count up, 65535 wrapping to 1 (0 means "none" on the wire)
 HEADROOM = 1024  # epochs one boot may issue (acquisitions) before its range could near an earlier boot's
@@ -94,6 +94,8 @@ class EpochLog:
     def __init__(self, path: Path | None, draw: Callable[[int], int] = secrets.randbelow) -> None:
         self.path = path
         self.earlier: tuple[Span, ...] = ()
+        if path is not None:
+            remove_leftovers(path)
         if path is not None and path.exists():
             self.earlier = parse(read_text(path), path)[-KEEP:]
         self.boot = choose(self.earlier, draw)
