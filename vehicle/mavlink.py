@@ -113,7 +113,6 @@ class Endpoint:
     def receive(self, data: bytes, t: float, source: Hashable | None = None) -> None:
         """Parse and handle whatever frames ``data`` holds; garbage is counted and dropped. ``source`` (a UDP
         address, opaque here) is remembered per sender, so the transport can keep the owner's (``pinned``)."""
-        self._source = source
         try:
             msgs = self.parser.parse_buffer(data) or []
         except Exception:  # noqa: BLE001 - a hostile byte stream must never take the vehicle down
@@ -121,8 +120,12 @@ class Endpoint:
             self.parser = mav.MAVLink(None, 0, 0)
             self.parser.robust_parsing = True
             return
-        for m in msgs:
-            self.handle(m, t)
+        self._source = source
+        try:
+            for m in msgs:
+                self.handle(m, t)
+        finally:
+            self._source = None  # frames handled later without a source are not attributed to this one
 
     def handle(self, m, t: float) -> None:
         if m.get_type() == "BAD_DATA":
