@@ -211,8 +211,9 @@ class Check:
 def _epoch_after(previous: int | None, seed: int) -> int:
     """A fresh uint16 epoch (0 means 'none' on the wire).
 
-    The first epoch after boot comes from ``seed`` (random at boot, so a restarted vehicle does not reuse the
-    epochs of its previous life); later ones count up, so no epoch repeats until 65535 roots have been issued.
+    The first epoch comes from ``seed`` only in the lockstep simulator, so its runs repeat; a real-time vehicle
+    starts its book at ``epoch_before`` of an epoch drawn by ``vehicle.epochs`` (OS random, clear of its recent
+    boots). Later ones count up, so no epoch repeats until 65535 roots have been issued.
     Merely differing from the previous epoch is not enough: A, B, A would revive A's stale commands.
     """
     if previous is None:
