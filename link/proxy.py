@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 from link import dialect
 from link.radio import LinkState, Radio, rssi_to_radio_status
-from link.transports import UdpTransport
+from link.transports import Address, UdpTransport
 
 RADIO_SYSID, RADIO_COMPID = 51, 68  # what SiK telemetry radios use for their RADIO_STATUS
 
@@ -38,7 +38,7 @@ class RadioProxy:
         self.radio = radio
         self.antenna, self.power_dbm, self.robot = antenna, power_dbm, robot
         self.state: LinkState | None = None
-        self._up: list[tuple[float, int, bytes]] = []  # to the vehicle
+        self._up: list[tuple[float, int, bytes, Address]] = []  # to the vehicle
         self._down: list[tuple[float, int, bytes]] = []  # to the ground stations
         self._seq = itertools.count()
         self._report = RadioReport()
@@ -59,15 +59,16 @@ class RadioProxy:
             return None
         return t + latency
 
-    def from_ground(self, t: float) -> list[bytes]:
-        """Datagrams from the ground stations that reach the vehicle by ``t``."""
-        for data, _addr in self.transport.receive():
+    def from_ground(self, t: float) -> list[tuple[bytes, Address]]:
+        """Datagrams from the ground stations that reach the vehicle by ``t``, with the address each came from."""
+        for data, addr in self.transport.receive():
             at = self._fate(t)
             if at is not None:
-                heapq.heappush(self._up, (at, next(self._seq), data))
+                heapq.heappush(self._up, (at, next(self._seq), data, addr))
         out = []
         while self._up and self._up[0][0] <= t:
-            out.append(heapq.heappop(self._up)[2])
+            _, _, data, addr = heapq.heappop(self._up)
+            out.append((data, addr))
         return out
 
     def to_ground(self, data: bytes, t: float) -> None:

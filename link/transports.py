@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import heapq
 import socket
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 
 Address = tuple[str, int]
@@ -16,10 +17,16 @@ Address = tuple[str, int]
 
 class UdpTransport:
     """One UDP socket. ``udpin``: bound, answers whoever talks to it; ``udpout``: also sends to fixed peers
-    (as SITLs send to 127.0.0.1:14550 and :14540 before anyone has spoken)."""
+    (as SITLs send to 127.0.0.1:14550 and :14540 before anyone has spoken).
+
+    The table of learned peers is bounded (``max_peers``), so a stranger cycling through source ports could push
+    everyone else out of it. ``pinned`` says which addresses must never go: the vehicle passes its owner's (and a
+    signed station's), so the transport stays free of lease logic. Strangers share what is left of the table, the
+    oldest unpinned address giving way, and a pinned address is always sent to, even if it was never learned.
+    """
 
     def __init__(self, bind: Address = ("127.0.0.1", 0), peers: tuple[Address, ...] = (),
-                 max_peers: int = 16) -> None:
+                 max_peers: int = 16, pinned: Callable[[], Collection[Address]] | None = None) -> None:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         self.sock.bind(bind)
@@ -27,6 +34,7 @@ class UdpTransport:
         self.fixed = list(peers)
         self.learned: list[Address] = []
         self.max_peers = max_peers
+        self.pinned = pinned
 
     @property
     def address(self) -> Address:
@@ -43,13 +51,28 @@ class UdpTransport:
             except OSError:  # ICMP port unreachable from a peer that went away
                 continue
             if addr not in self.fixed and addr not in self.learned:
-                self.learned.append(addr)
-                del self.learned[: -self.max_peers]
+                self._learn(addr)
             out.append((data, addr))
         return out
 
+    def _learn(self, addr: Address) -> None:
+        """Add a peer; when the table is full the oldest address that is not pinned makes room."""
+        if len(self.learned) >= self.max_peers:
+            keep = set(self.pinned()) if self.pinned is not None else set()
+            victim = next((i for i, a in enumerate(self.learned) if a not in keep), None)
+            if victim is None:
+                return  # every slot holds a pinned peer: a stranger waits
+            del self.learned[victim]
+        self.learned.append(addr)
+
     def send(self, data: bytes, to: Address | None = None) -> None:
-        for addr in [to] if to else [*self.fixed, *self.learned]:
+        if to:
+            targets = [to]
+        else:
+            targets = [*self.fixed, *self.learned]
+            if self.pinned is not None:
+                targets += [a for a in self.pinned() if a not in targets]
+        for addr in targets:
             # nobody listening there (yet) is fine: UDP telemetry is fire and forget
             with contextlib.suppress(OSError):
                 self.sock.sendto(data, addr)

@@ -65,10 +65,25 @@ def _address(text: str) -> tuple[str, int]:
         raise argparse.ArgumentTypeError(f"{text!r} is not HOST:PORT") from None
 
 
+def _epochs_file(args: argparse.Namespace):
+    """Where `sim serve` keeps the epochs it issued: ``--state DIR``, else beside ``--params FILE``, else the
+    user's state directory ($XDG_STATE_HOME/returnlink, by default ~/.local/state/returnlink)."""
+    import os
+    from pathlib import Path
+
+    if args.state:
+        return Path(args.state) / "returnlink.epochs"
+    if args.params:
+        return Path(args.params).with_suffix(".epochs")
+    base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
+    return Path(base) / "returnlink" / "returnlink.epochs"
+
+
 def _cmd_sim_serve(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from sim.serve import Server
+    from vehicle.storage import StoredFileError
 
     sc = _scenario(args.scenario)
     if args.speedup <= 0:
@@ -78,16 +93,25 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
     keystore = None
     if args.key:
         from vehicle.keystore import KeyStore
-        from vehicle.storage import StoredFileError
 
         try:
             keystore = KeyStore.open(args.key)
         except StoredFileError as e:
             print(f"returnlink: error: key file {e}", file=sys.stderr)
             return 2
+    epochs = _epochs_file(args)
+    try:
+        epochs.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        print(f"returnlink: error: cannot create the state directory {epochs.parent}: {e.strerror or e}",
+              file=sys.stderr)
+        return 2
     try:
         server = Server(sc, args.vehicle, args.seed, args.port, peers, args.perfect_link,
-                        Path(args.params) if args.params else None, keystore)
+                        Path(args.params) if args.params else None, keystore, epochs)
+    except StoredFileError as e:  # a damaged kept file: refuse to start rather than boot on defaults
+        print(f"returnlink: error: {e}", file=sys.stderr)
+        return 2
     except OSError as e:
         print(f"returnlink: error: cannot bind 127.0.0.1:{args.port}: {e}", file=sys.stderr)
         return 2
@@ -160,6 +184,8 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--perfect-link", action="store_true", help="no radio model: every packet arrives")
     serve.add_argument("--duration", type=float, default=float("inf"), help="stop after this many simulated s")
     serve.add_argument("--params", help=".parm file to boot from and save parameter changes to")
+    serve.add_argument("--state", help="directory for the epochs kept across restarts (default: beside --params, "
+                                       "else $XDG_STATE_HOME/returnlink)")
     serve.add_argument("--out", help="where to write the plot on exit")
     serve.add_argument("--key", help="signing key file (returnlink keys new): sign everything, obey only signed "
                        "frames; its timestamp is kept in FILE.stamp")

@@ -18,6 +18,7 @@ from vehicle.app import Vehicle
 from vehicle.io import Readings
 from vehicle.mavlink import Endpoint
 from vehicle.params import load_defaults
+from vehicle.storage import remove_leftovers
 
 
 class SimDriver:
@@ -46,12 +47,15 @@ class SimDriver:
 
 
 def simulated_vehicle(scenario: Scenario, kind: str, seed: int, param_file: Path | None = None,
-                      **endpoint_options) -> tuple[SimDriver, Vehicle, Endpoint]:
+                      boot_epoch: int | None = None, **endpoint_options) -> tuple[SimDriver, Vehicle, Endpoint]:
     """The scenario's robot with the real onboard software on it: boot parameters from ``param_file`` (or the
-    defaults), then the scenario's own, as `sim run` and `sim serve` both start it."""
+    defaults; StoredFileError if it is damaged), then the scenario's own, as `sim run` and `sim serve` both start
+    it. ``boot_epoch`` None (`sim run`) derives the first epoch from ``seed``; `sim serve` draws one."""
     driver = SimDriver(scenario, kind, np.random.default_rng(seed))
+    if param_file is not None:
+        remove_leftovers(param_file)
     params = load_defaults(param_file) if param_file is not None and param_file.is_file() else load_defaults()
     for k, v in scenario.params.items():
         params.set(k, v)
-    vehicle = Vehicle(driver, params, scenario.start, 0.0, seed=seed)
+    vehicle = Vehicle(driver, params, scenario.start, 0.0, seed=seed, boot_epoch=boot_epoch)
     return driver, vehicle, Endpoint(vehicle, param_file=param_file, **endpoint_options)

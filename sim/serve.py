@@ -21,21 +21,28 @@ from sim.driver import simulated_vehicle
 from sim.plots import draw_trail, draw_world, plt, save
 from sim.scenario import Scenario
 from vehicle.app import DT, run
+from vehicle.epochs import EpochLog
 from vehicle.keystore import KeyStore
 
 
 class Server:
     def __init__(self, scenario: Scenario, vehicle: str | None = None, seed: int | None = None,
                  port: int = 14580, peers: tuple[tuple[str, int], ...] = (("127.0.0.1", 14550), ("127.0.0.1", 14540)),
-                 perfect_link: bool = False, param_file: Path | None = None, keystore: KeyStore | None = None) -> None:
+                 perfect_link: bool = False, param_file: Path | None = None, keystore: KeyStore | None = None,
+                 epochs_file: Path | None = None) -> None:
         """``keystore`` (``KeyStore.open(FILE)``): the vehicle signs with that key and obeys only frames signed with
-        it; its signing clock is the wall clock, as ground stations' are."""
+        it; its signing clock is the wall clock, as ground stations' are. ``epochs_file``: where the epochs this
+        vehicle issues are kept across restarts (DESIGN §3.1); the boot epoch is drawn from the OS random source
+        either way, never from ``seed``."""
         sc = self.scenario = scenario
         self.kind = vehicle or sc.vehicle
         self.seed = sc.seed if seed is None else seed
+        self.epochs = EpochLog(epochs_file)
         self.driver, self.vehicle, self.endpoint = simulated_vehicle(
-            sc, self.kind, self.seed, param_file, keystore=keystore, stamp=lambda t: stamp_from_unix(time.time()))
-        self.transport = UdpTransport(("127.0.0.1", port), peers)
+            sc, self.kind, self.seed, param_file, self.epochs.boot, keystore=keystore,
+            stamp=lambda t: stamp_from_unix(time.time()))
+        self.vehicle.on_epoch = self.epochs.issued
+        self.transport = UdpTransport(("127.0.0.1", port), peers, pinned=self.endpoint.pinned)
         station = sc.station(sc.operator_station)
         radio = None if perfect_link else Radio(sc.radio, self.driver.world.attenuation_db, self.seed + 1)
         self.proxy = RadioProxy(self.transport, radio, (station.x, station.y), station.power_dbm,
@@ -47,7 +54,7 @@ class Server:
     def address(self) -> tuple[str, int]:
         return self.transport.address
 
-    def _receive(self, t: float) -> list[bytes]:
+    def _receive(self, t: float) -> list[tuple[bytes, tuple[str, int]]]:
         self.proxy.flush(t)
         return self.proxy.from_ground(t)
 

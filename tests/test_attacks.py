@@ -65,6 +65,7 @@ def test_a_replayed_frame_is_refused():
     d = gs.arm(False)
     captured = list(gs.frames)  # the signed DISARM, as a listener on the link would record it
     pair.until(lambda: d.done, 2, "ACK")
+    pair.step(3.1)  # an identical ARM within the 3 s retry window would be answered, not run (DESIGN §3.9)
     a = gs.arm(True)
     pair.until(lambda: a.done, 2, "ACK")
     pair.step(5.0)  # past the command retry window: only the signature's timestamp tells a replay now

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 
 from vehicle.lease import (
@@ -225,3 +227,29 @@ def test_new_epoch_differs_from_previous():
         nxt = book.acquire(GCS, 190, float(k), seed=k).book
         assert nxt.epoch != book.epoch and nxt.epoch != 0
         book = nxt
+
+
+def test_a_running_return_is_never_taken_over_and_a_silent_owner_after_it_is():
+    """DESIGN §3.8, as a timeline: the owner falls silent at 0 s; from 3 s the return holds the lease, and no
+    other station takes the root, neither explicitly nor by auto-grant, even though the owner is stale; once the
+    chain has ended (AWAITING_CLAIM) the silent owner may be taken over."""
+    book = LeaseBook(config=LeaseConfig(link_timeout=3.0, stale_take=True)).acquire(GCS, 190, 0.0, seed=7).book
+    assert book.take_refusal(OTHER, 1.0) == f"owned by GCS {GCS}; takeover not allowed"  # owner still fresh
+    book = book.tick(3.0).book  # COMMS_LOST: the return service holds the lease
+    assert book.returning and book.owner_stale(4.0)
+    for t in (3.0, 4.0, 30.0):
+        assert not book.may_take(OTHER, t)
+        assert book.take_refusal(OTHER, t) == "return in progress"
+        out = book.admit(OTHER, 190, t)
+        assert out.book is book and out.events == ()
+        chk = book.check(OTHER)
+        assert chk.reason is RejectReason.NOT_IN_CONTROL and chk.detail == "return in progress"
+    allowed = replace(book, takeover_allowed=True)  # not even a takeover the owner once allowed
+    assert allowed.take_refusal(OTHER, 4.0) == "return in progress"
+    book = book.finish(book.current.index, ExpireReason.COMPLETED, 31.0).book  # the chain ran out
+    assert not book.returning and book.current.holder is Holder.OPERATOR and not book.current.claimed
+    assert book.may_take(OTHER, 31.0)
+    out = book.admit(OTHER, 190, 31.0)
+    assert out.book.owner == OTHER and out.events[0].reason is ExpireReason.ROOT_REPLACED
+    assert book.owner == GCS  # and the owner could always have come back itself
+    assert book.may_take(GCS, 4.0)

@@ -76,6 +76,8 @@ class LeaseMachine(RuleBasedStateMachine):
                 self.enqueued.remove(q)
         if before.owner != after.owner or before.epoch != after.epoch:
             self._reset_link_model(after)
+            # DESIGN §3.8: a running return is never taken over by another station
+            assert after.owner is None or before.owner in (None, after.owner) or not before.returning
         self.book = after
 
     def _reset_link_model(self, book: LeaseBook) -> None:

@@ -60,7 +60,8 @@ def test_sim_serve_answers_and_leaves_a_plot(tmp_path):
     port = free_udp_port()
     gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255, dialect="returnlink")
     proc = subprocess.Popen([sys.executable, "-m", "sim.cli", "sim", "serve", "tunnel", "--port", "0", "--peer",
-                             f"127.0.0.1:{port}", "--speedup", "4", "--duration", "12", "--out", str(tmp_path)],
+                             f"127.0.0.1:{port}", "--speedup", "4", "--duration", "12", "--out", str(tmp_path),
+                             "--state", str(tmp_path)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=20)

@@ -53,3 +53,31 @@ def test_lockstep_delivers_in_time_order_per_destination():
     assert bus.receive("vehicle", 0.05) == [(b"b", "gcs"), (b"c", "gcs")]
     assert bus.receive("gcs", 1.0) == [(b"x", "vehicle")]
     assert bus.pending() == 0
+
+
+def test_strangers_cycling_ports_never_evict_a_pinned_peer():
+    """17+ source ports would push a 16-entry table's oldest peer out; the owner's address is pinned."""
+    owner = UdpTransport(("127.0.0.1", 0))
+    pins: set = set()
+    vehicle = UdpTransport(("127.0.0.1", 0), max_peers=16, pinned=lambda: pins)
+    strangers = [UdpTransport(("127.0.0.1", 0)) for _ in range(20)]
+    try:
+        owner.send(frame(255), vehicle.address)
+        assert receive_within(vehicle)[0][1] == owner.address
+        pins.add(owner.address)  # the vehicle says: this one owns me
+        for s in strangers * 2:
+            s.send(frame(7), vehicle.address)
+        end = time.monotonic() + 2.0
+        heard = set()
+        while len(heard) < len(strangers) and time.monotonic() < end:
+            heard |= {addr for _, addr in vehicle.receive()}
+            time.sleep(0.01)
+        assert len(heard) == len(strangers)
+        assert owner.address in vehicle.learned and len(vehicle.learned) == 16
+        assert strangers[-1].address in vehicle.learned  # strangers still share the rest of the table
+        vehicle.learned.remove(owner.address)  # even when it was never (re)learned, a pinned peer is sent to
+        vehicle.send(frame(1))
+        assert receive_within(owner)
+    finally:
+        for t in (owner, vehicle, *strangers):
+            t.close()

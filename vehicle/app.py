@@ -28,6 +28,7 @@ from vehicle.lease import (
     QueuedCommand,
     RejectReason,
     Verdict,
+    epoch_before,
 )
 from vehicle.params import Params
 from vehicle.returning import LINK_TAG_LAG_S
@@ -111,15 +112,19 @@ class Vehicle:
     """The onboard state machine around the pure parts. Mutable: it is the shell that owns the current book."""
 
     def __init__(self, driver: RobotDriver, params: Params, pose: tuple[float, float, float], t: float = 0.0,
-                 seed: int = 0) -> None:
+                 seed: int = 0, boot_epoch: int | None = None) -> None:
+        """``boot_epoch``: the first epoch to issue, drawn at boot by a real-time vehicle (``vehicle.epochs``);
+        None derives it from ``seed``, as only the lockstep simulator may (DESIGN §3.1)."""
         self.driver = driver
         self.params = params
         self.seed = seed
+        self.on_epoch: Callable[[int], str | None] | None = None  # told of each epoch issued, before its ACK
         x, y, yaw = pose
         self.home = (x, y)
         self.estimator = Estimator(x, y, yaw, t, pos_std=0.3, yaw_std=0.02)
         self.trail = Trail(trail_config(params))
-        self.book = LeaseBook(lease_config(params), plan=default_plan(params))
+        self.book = LeaseBook(lease_config(params), plan=default_plan(params),
+                              last_epoch=None if boot_epoch is None else epoch_before(boot_epoch))
         self.plan_items: tuple[PlanItem, ...] = ()  # the uploaded return plan (empty: the default plan)
         self.t = t
         self.armed = False
@@ -148,7 +153,12 @@ class Vehicle:
 
     # ----- lease transitions -------------------------------------------------------------------------------
     def _apply(self, out: Outcome) -> None:
+        issued = out.book.last_epoch != self.book.last_epoch
         self.book = out.book
+        if issued and self.on_epoch is not None and out.book.last_epoch is not None:
+            problem = self.on_epoch(out.book.last_epoch)  # kept before anyone hears of the new epoch
+            if problem:
+                self.notices.append(problem)
         self.events.extend(out.events)
         self.event_log.extend(out.events)
         for ev in out.events:
@@ -184,9 +194,9 @@ class Vehicle:
             self.last_good_packet = t
 
     def acquire(self, sender: int, compid: int, t: float, allow_takeover: bool) -> Check:
-        if not self.book.may_take(sender, t):
-            return self._reject(Check(Verdict.REJECT, None, RejectReason.NOT_IN_CONTROL,
-                                      f"owned by GCS {self.book.owner}; takeover not allowed"))
+        why = self.book.take_refusal(sender, t)
+        if why is not None:
+            return self._reject(Check(Verdict.REJECT, None, RejectReason.NOT_IN_CONTROL, why))
         if self.book.owner == sender:
             self.book = replace(self.book, takeover_allowed=allow_takeover)
             return Check(Verdict.EXECUTE, self.book.current_id)
@@ -445,12 +455,13 @@ def velocity_to_command(vn: float, ve: float, yaw_rate: float | None, yaw: float
     return speed * max(0.0, math.cos(err)), turn
 
 
-def run(vehicle: Vehicle, endpoint, receive: Callable[[float], list[bytes]], send: Callable[[bytes, float], None],
+def run(vehicle: Vehicle, endpoint, receive: Callable[[float], list], send: Callable[[bytes, float], None],
         clock: Callable[[], float] = time.monotonic, stop: Callable[[], bool] = lambda: False,
         sleep: Callable[[float], None] = time.sleep, speedup: float = 1.0,
         after_tick: Callable[[float], None] | None = None) -> None:
     """The real-time shell around one vehicle: 50 Hz ticks paced by ``clock`` (``speedup`` times faster),
-    frames in through ``receive(t)`` and out through ``send(frame, t)``, until ``stop()``.
+    frames in through ``receive(t)`` (bytes, or (bytes, source address)) and out through ``send(frame, t)``,
+    until ``stop()``.
 
     A real robot passes a UDP or serial link and its driver; the simulator passes the radio proxy and steps the
     physics in ``after_tick``.
@@ -458,8 +469,11 @@ def run(vehicle: Vehicle, endpoint, receive: Callable[[float], list[bytes]], sen
     t0, start = clock(), vehicle.t
     while not stop():
         t = round(vehicle.t + DT, 9)
-        for data in receive(t):
-            endpoint.receive(data, t)
+        for item in receive(t):
+            if isinstance(item, tuple):  # (bytes, where they came from): the endpoint learns its owner's address
+                endpoint.receive(item[0], t, item[1])
+            else:
+                endpoint.receive(item, t)
         vehicle.tick(t)
         if after_tick is not None:
             after_tick(t)

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 NO_INDEX = 0xFFFF  # wire value for "no lease" in LEASE_EVENT / LEASE_STATUS
+RETURN_IN_PROGRESS = "return in progress"  # why a takeover (or a stranger's command) is refused during a return
 
 
 class Holder(enum.IntEnum):
@@ -210,13 +211,22 @@ class Check:
 def _epoch_after(previous: int | None, seed: int) -> int:
     """A fresh uint16 epoch (0 means 'none' on the wire).
 
-    The first epoch after boot comes from ``seed`` (random at boot, so a restarted vehicle does not reuse the
-    epochs of its previous life); later ones count up, so no epoch repeats until 65535 roots have been issued.
+    The first epoch comes from ``seed`` only in the lockstep simulator, so its runs repeat; a real-time vehicle
+    starts its book at ``epoch_before`` of an epoch drawn by ``vehicle.epochs`` (OS random, clear of its recent
+    boots). Later ones count up, so no epoch repeats until 65535 roots have been issued.
     Merely differing from the previous epoch is not enough: A, B, A would revive A's stale commands.
     """
     if previous is None:
         return (seed * 2654435761 + 40503) % 0xFFFF + 1
     return previous % 0xFFFF + 1
+
+
+def epoch_before(epoch: int) -> int:
+    """The ``last_epoch`` a book must start from for its first root to get ``epoch`` (a real-time vehicle's boot
+    epoch, drawn from the OS random source by ``vehicle.epochs``)."""
+    if not 1 <= epoch <= 0xFFFF:
+        raise ValueError(f"epoch {epoch} outside 1..65535")
+    return (epoch - 2) % 0xFFFF + 1
 
 
 @dataclass(frozen=True)
@@ -279,7 +289,8 @@ class LeaseBook:
         sender last claimed (DESIGN §3.4).
         """
         if self.owner is None or sender != self.owner:
-            return Check(Verdict.REJECT, claim, RejectReason.NOT_IN_CONTROL, "sender does not own the vehicle")
+            why = RETURN_IN_PROGRESS if self.returning else "sender does not own the vehicle"
+            return Check(Verdict.REJECT, claim, RejectReason.NOT_IN_CONTROL, why)
         if claim is None:
             claim = self.claimed_by(sender)
             if claim is None:
@@ -333,18 +344,37 @@ class LeaseBook:
         event = LeaseEvent(t, self.epoch or 0, old, None, ExpireReason.RELEASED, Holder.NONE)
         return Outcome(book, (event,), dropped=self.queue)
 
+    @property
+    def returning(self) -> bool:
+        """A service block of the return plan holds the current lease: the return is running."""
+        return bool(self.leases) and self.leases[0].holder is Holder.RETURN_SERVICE
+
+    def take_refusal(self, sysid: int, t: float) -> str | None:
+        """Why ``sysid`` may not take the root now, or None if it may (unowned, its own, allowed takeover, or
+        a stale owner).
+
+        A running return is never taken over (DESIGN §3.8): the owner is silent exactly because its link is lost,
+        which is what the return exists to protect, so a silent owner only becomes fair game once the chain has
+        ended (AWAITING_CLAIM)."""
+        if self.owner is None or self.owner == sysid:
+            return None
+        if self.returning:
+            return RETURN_IN_PROGRESS
+        if self.takeover_allowed or (self.config.stale_take and self.owner_stale(t)):
+            return None
+        return f"owned by GCS {self.owner}; takeover not allowed"
+
     def may_take(self, sysid: int, t: float) -> bool:
-        """Whether ``sysid`` may take the root now (unowned, its own, allowed takeover, or a stale owner)."""
-        if self.owner is None or self.owner == sysid or self.takeover_allowed:
-            return True
-        return self.config.stale_take and self.owner_stale(t)
+        """Whether ``sysid`` may take the root now (see ``take_refusal``)."""
+        return self.take_refusal(sysid, t) is None
 
     def admit(self, sender: int, compid: int, t: float, seed: int = 0) -> Outcome:
         """Plain clients (DESIGN §3.8): a state-changing command from a ground station that may take the
-        vehicle implicitly acquires the root when auto-grant is on. Returns the book unchanged otherwise."""
+        vehicle implicitly acquires the root when auto-grant is on. Returns the book unchanged otherwise.
+        An explicit allow-takeover is for REQUEST_OPERATOR_CONTROL only: a stream of commands never takes over."""
         if sender == self.owner or not self.config.autogrant:
             return Outcome(self)
-        if self.owner is None or (self.config.stale_take and self.owner_stale(t)):
+        if self.owner is None or (not self.returning and self.config.stale_take and self.owner_stale(t)):
             return self.acquire(sender, compid, t, seed)
         return Outcome(self)
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
@@ -34,13 +34,14 @@ from vehicle.missions import (
     to_plan,
 )
 from vehicle.modes import decode_mode
-from vehicle.params import SPECS, ParamError, format_parm
+from vehicle.params import SPECS, ParamError, save_parm
+from vehicle.retries import RetryWindow, command_key
 from vehicle.service import NAV_RETURN_TO_LINK, PlanItem
 from vehicle.telemetry import Telemetry, wire_index
 
 mav = dialect.load()
 
-RETRY_WINDOW = 3.0  # s: an identical command from the same sender within this is a retry, not a new command
+RETRY_WINDOW = 3.0  # s: an identical command from the same sender within this is a retry or a late copy
 REJECT_NOTICE_GAP = 2.0  # s between STATUSTEXTs about a rejected stream (MANUAL_CONTROL, velocity targets)
 
 REJECT_RESULT = {
@@ -67,14 +68,6 @@ class _Sink:
 
     def write(self, data: bytes) -> None:
         self.frames.append(bytes(data))
-
-
-@dataclass
-class _Answered:
-    key: tuple
-    at: float
-    result: int
-    param2: int
 
 
 @dataclass
@@ -106,8 +99,11 @@ class Endpoint:
         self.parser = mav.MAVLink(None, 0, 0)
         self.parser.robust_parsing = True
         self.counters = Counters()
-        self.answered: dict[tuple[int, int, int], _Answered] = {}
+        self.answered = RetryWindow(RETRY_WINDOW)
         self.notice_at: dict[tuple[int, str], float] = {}
+        self.sources: dict[int, Hashable] = {}  # sysid -> where its last frame came from
+        self._source: Hashable | None = None
+        self.signed: set[int] = set()  # senders whose frames passed the signature check
         self.statustext_id = 0
         self.missions = MissionServer(self._send, self._accept_mission)
         self.telemetry = Telemetry(self.mav, vehicle, self.origin, boot_t,
@@ -192,8 +188,9 @@ class Endpoint:
             self.mav.statustext_send(severity, b"", id=self.statustext_id, chunk_seq=len(chunks))
 
     # ----- input ---------------------------------------------------------------------------------------------
-    def receive(self, data: bytes, t: float) -> None:
-        """Parse and handle whatever frames ``data`` holds; garbage is counted and dropped."""
+    def receive(self, data: bytes, t: float, source: Hashable | None = None) -> None:
+        """Parse and handle whatever frames ``data`` holds; garbage is counted and dropped. ``source`` (a UDP
+        address, opaque here) is remembered per sender, so the transport can keep the owner's (``pinned``)."""
         try:
             msgs = self.parser.parse_buffer(data) or []
         except Exception:  # noqa: BLE001 - a hostile byte stream must never take the vehicle down
@@ -201,8 +198,12 @@ class Endpoint:
             self.parser = mav.MAVLink(None, 0, 0)
             self.parser.robust_parsing = True
             return
-        for m in msgs:
-            self.handle(m, t)
+        self._source = source
+        try:
+            for m in msgs:
+                self.handle(m, t)
+        finally:
+            self._source = None  # frames handled later without a source are not attributed to this one
 
     def handle(self, m, t: float) -> None:
         if m.get_type() == "BAD_DATA":
@@ -224,6 +225,10 @@ class Endpoint:
                 return
         if self.trusted:  # an unsigned frame never counts as the owner heard: forged heartbeats keep nothing alive
             self.vehicle.heard(sender, t, m.get_seq())
+            if self._source is not None:  # only a trusted frame may move a sender's address (at most 255 senders)
+                self.sources[sender] = self._source
+                if self.key is not None:
+                    self.signed.add(sender)
         handler = getattr(self, f"_on_{m.get_type().lower()}", None)
         if handler is None:
             return
@@ -233,6 +238,14 @@ class Endpoint:
             # a well-framed message with absurd content: refuse it, keep running, keep state
             self.counters.bad_frames += 1
             self.statustext(f"ignored {m.get_type()}: {e}", mav.MAV_SEVERITY_WARNING)
+
+    def pinned(self) -> list[Hashable]:
+        """Addresses the transport must never drop from its peer table: the owner's and, with a key installed,
+        every station signing with it (DESIGN §3.9)."""
+        keep = set(self.signed)  # with a key, every station that signs with it (it may become the owner)
+        if self.vehicle.book.owner is not None:
+            keep.add(self.vehicle.book.owner)
+        return [self.sources[s] for s in keep if s in self.sources]
 
     def _for_us(self, m) -> bool:
         ts = getattr(m, "target_system", None)
@@ -251,13 +264,12 @@ class Endpoint:
         self._command(m.command, params, sender, scomp, t)
 
     def _command(self, command: int, p: tuple, sender: int, scomp: int, t: float) -> None:
-        """Exactly one COMMAND_ACK per command message; a retry repeats the first answer without re-executing."""
-        key = (command, *[round(x, 6) if math.isfinite(x) else str(x) for x in p])
-        slot = (sender, scomp, command)
-        prev = self.answered.get(slot)
-        if prev is not None and prev.key == key and t - prev.at <= RETRY_WINDOW:
+        """Exactly one COMMAND_ACK per command message; a retry or a late copy of any command of the last
+        RETRY_WINDOW seconds repeats the first answer and is never executed again (DESIGN §3.9)."""
+        key = command_key(sender, scomp, command, p)
+        prev = self.answered.seen(key, t)
+        if prev is not None:
             self.counters.command_retries += 1
-            prev.at = t
             self._ack(command, prev.result, prev.param2, sender, scomp)
             return
         self.counters.commands += 1
@@ -271,10 +283,7 @@ class Endpoint:
             except (ValueError, OverflowError) as e:  # NaN or infinity where a number is needed
                 self.statustext(f"command {command} refused: {e}", mav.MAV_SEVERITY_WARNING)
                 result, param2 = mav.MAV_RESULT_DENIED, 0
-        self.answered[slot] = _Answered(key, t, result, param2)
-        if len(self.answered) > 256:
-            for k in sorted(self.answered, key=lambda k: self.answered[k].at)[:128]:
-                del self.answered[k]
+        self.answered.remember(key, result, param2, t)
         self._ack(command, result, param2, sender, scomp)
 
     def _ack(self, command: int, result: int, param2: int, sender: int, scomp: int) -> None:
@@ -326,6 +335,7 @@ class Endpoint:
         return self._verdict(chk, f"mode {mode}", sender)
 
     def _cmd_request_message(self, p, sender, scomp, t):
+        """One message, once: a read, answered to anyone (it starts no stream here)."""
         msgid = int(p[0])
         if not self.telemetry.emit(msgid, t):
             return mav.MAV_RESULT_DENIED, 0
@@ -340,6 +350,12 @@ class Endpoint:
         return mav.MAV_RESULT_ACCEPTED, 0
 
     def _cmd_message_interval(self, p, sender, scomp, t):
+        """Telemetry rates are vehicle state shared by every station (DESIGN §3.9): only the owner changes
+        them; with nobody owning, any plain client may (MAVSDK and MAVProxy set intervals when they connect)."""
+        if self.vehicle.refuses(sender):
+            self.statustext(f"message interval from {sender} refused: GCS {self.vehicle.book.owner} is in control",
+                            mav.MAV_SEVERITY_WARNING)
+            return mav.MAV_RESULT_DENIED, 0
         if not self.telemetry.set_interval(int(p[0]), p[1], t):
             return mav.MAV_RESULT_DENIED, 0
         return mav.MAV_RESULT_ACCEPTED, 0
@@ -559,9 +575,11 @@ class Endpoint:
             try:
                 self.vehicle.set_param(name, float(m.param_value))
                 if self.param_file is not None:
-                    self.param_file.write_text(format_parm(self.vehicle.params.values), encoding="utf-8")
+                    save_parm(self.param_file, self.vehicle.params.values)
             except ParamError as e:
                 self.statustext(f"param set refused: {e}", mav.MAV_SEVERITY_WARNING)
+            except OSError as e:  # in use until the next boot, which will not know it: say so
+                self.statustext(f"param {name} set but not saved: {e.strerror or e}", mav.MAV_SEVERITY_ERROR)
         self._param_value(names.index(name))
 
     # ----- telemetry ----------------------------------------------------------------------------------------

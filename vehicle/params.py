@@ -11,6 +11,8 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from vehicle.storage import StoredFileError, read_text, write_atomic
+
 
 @dataclass(frozen=True)
 class ParamSpec:
@@ -88,8 +90,14 @@ class Params:
         return [s.name for s in SPECS]
 
 
-def parse_parm(text: str, source: str = "<parm>") -> dict[str, float]:
-    """MAVProxy/ArduPilot .parm: ``NAME VALUE`` (or ``NAME,VALUE``) per line, ``#`` comments."""
+class _BadLine(ValueError):
+    def __init__(self, line: int, what: str) -> None:
+        super().__init__(what)
+        self.line, self.what = line, what
+
+
+def _parse(text: str) -> dict[str, float]:
+    """The values of a .parm text, or _BadLine(line, what) at the first line that is not ``NAME VALUE``."""
     out: dict[str, float] = {}
     for n, raw in enumerate(text.splitlines(), 1):
         line = raw.split("#", 1)[0].strip()
@@ -97,16 +105,42 @@ def parse_parm(text: str, source: str = "<parm>") -> dict[str, float]:
             continue
         parts = line.replace(",", " ").split()
         if len(parts) != 2:
-            raise ParamError(f"{source}:{n}: expected 'NAME VALUE', got {raw.strip()!r}")
+            raise _BadLine(n, f"expected 'NAME VALUE', got {raw.strip()!r}")
         try:
             value = float(parts[1])
         except ValueError:
-            raise ParamError(f"{source}:{n}: {parts[1]!r} is not a number") from None
+            raise _BadLine(n, f"{parts[1]!r} is not a number") from None
         try:
             out[parts[0]] = validate(parts[0], value)
         except ParamError as e:
-            raise ParamError(f"{source}:{n}: {e}") from None
+            raise _BadLine(n, str(e)) from None
     return out
+
+
+def parse_parm(text: str, source: str = "<parm>") -> dict[str, float]:
+    """MAVProxy/ArduPilot .parm: ``NAME VALUE`` (or ``NAME,VALUE``) per line, ``#`` comments."""
+    try:
+        return _parse(text)
+    except _BadLine as e:
+        raise ParamError(f"{source}:{e.line}: {e.what}") from None
+
+
+def read_parm_file(path: Path) -> dict[str, float]:
+    """A .parm file the vehicle boots from, read strictly: StoredFileError naming the file and line if it is
+    empty, ends in the middle of a line, or has a line that is not a valid ``NAME VALUE``.
+
+    Our own files are written whole (``save_parm``) and always end with a newline, so a file that does not was cut
+    short by something else: its last value may be a truncated number that still parses (``5`` of ``50``).
+    """
+    text = read_text(path)
+    if not text.strip():
+        raise StoredFileError(path, 1, "empty file, no parameters")
+    if not text.endswith("\n"):
+        raise StoredFileError(path, text.count("\n") + 1, "incomplete last line (no newline at the end of the file)")
+    try:
+        return _parse(text)
+    except _BadLine as e:
+        raise StoredFileError(path, e.line, e.what) from None
 
 
 def format_parm(values: dict[str, float]) -> str:
@@ -118,7 +152,14 @@ def format_parm(values: dict[str, float]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def save_parm(path: Path, values: dict[str, float]) -> None:
+    """Replace the vehicle's .parm file atomically: a crash or a reader mid-save sees the old or the new file."""
+    write_atomic(path, format_parm(values))
+
+
 def load_defaults(path: Path = DEFAULTS_FILE) -> Params:
+    """The parameters to boot with: ``path`` read strictly (StoredFileError if damaged), or the built-in
+    defaults when there is no such file yet."""
     if path.is_file():
-        return Params(parse_parm(path.read_text(encoding="utf-8"), str(path)))
+        return Params(read_parm_file(path))
     return Params()

@@ -57,6 +57,21 @@ def write_atomic(path: str | os.PathLike, data: str | bytes, mode: int = 0o644) 
     _fsync_dir(directory)
 
 
+def remove_leftovers(path: str | os.PathLike) -> int:
+    """Delete the temporary files a crash left beside ``path`` mid-write (``write_atomic``'s ``.NAME.*.tmp``).
+
+    Call at boot, before anything writes ``path``: the kept file itself is whole either way, this only stops
+    every crash from leaving one more orphan. Returns how many were removed."""
+    target = Path(path)
+    directory = target.parent if str(target.parent) else Path(".")
+    removed = 0
+    for tmp in directory.glob(f".{target.name}.*.tmp"):
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+            removed += 1
+    return removed
+
+
 def _fsync_dir(directory: Path) -> None:
     """Make the rename itself durable (POSIX); harmless where directories cannot be opened."""
     try:
