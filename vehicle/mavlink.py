@@ -14,6 +14,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from link import dialect
+from link.command_params import check_command, command_name, command_values
+from link.plan_items import MISSION_FRAME, NAV_RETURN_TO_LINK, ItemError
+from link.plan_items import values as item_values
 from vehicle.app import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, Vehicle, velocity_to_command
 from vehicle.lease import Check, RejectReason, Verdict
 from vehicle.missions import (
@@ -30,7 +33,7 @@ from vehicle.missions import (
 )
 from vehicle.modes import decode_mode
 from vehicle.params import SPECS, ParamError, format_parm
-from vehicle.service import NAV_RETURN_TO_LINK, PlanItem
+from vehicle.service import PlanItem
 from vehicle.telemetry import Telemetry, wire_index
 
 mav = dialect.load()
@@ -72,6 +75,7 @@ class Counters:
     commands: int = 0
     command_retries: int = 0
     unsupported: int = 0
+    handler_faults: int = 0  # a message whose handling raised: reported and counted, never fatal
 
 
 class Endpoint:
@@ -148,6 +152,9 @@ class Endpoint:
             # a well-framed message with absurd content: refuse it, keep running, keep state
             self.counters.bad_frames += 1
             self.statustext(f"ignored {m.get_type()}: {e}", mav.MAV_SEVERITY_WARNING)
+        except Exception as e:  # noqa: BLE001 - a fault in one handler must never take the vehicle down
+            self.counters.handler_faults += 1
+            self.statustext(f"fault handling {m.get_type()}: {type(e).__name__}: {e}", mav.MAV_SEVERITY_ERROR)
 
     def _for_us(self, m) -> bool:
         ts = getattr(m, "target_system", None)
@@ -177,15 +184,24 @@ class Endpoint:
             return
         self.counters.commands += 1
         handler = COMMANDS.get(command)
+        bad_param = check_command(command, p) if handler is not None else None
         if handler is None:
             self.counters.unsupported += 1
             result, param2 = mav.MAV_RESULT_UNSUPPORTED, 0
+        elif bad_param is not None:  # out of range, NaN or infinite where it matters: never half-executed
+            self.statustext(f"refused: {bad_param}", mav.MAV_SEVERITY_WARNING)
+            result, param2 = mav.MAV_RESULT_DENIED, 0
         else:
             try:
-                result, param2 = handler(self, p, sender, scomp, t)
+                result, param2 = handler(self, command_values(command, p), sender, scomp, t)
             except (ValueError, OverflowError) as e:  # NaN or infinity where a number is needed
-                self.statustext(f"command {command} refused: {e}", mav.MAV_SEVERITY_WARNING)
+                self.statustext(f"{command_name(command)} refused: {e}", mav.MAV_SEVERITY_WARNING)
                 result, param2 = mav.MAV_RESULT_DENIED, 0
+            except Exception as e:  # noqa: BLE001 - answered FAILED, counted, and the vehicle keeps running
+                self.counters.handler_faults += 1
+                self.statustext(f"fault in {command_name(command)}: {type(e).__name__}: {e}",
+                                mav.MAV_SEVERITY_ERROR)
+                result, param2 = mav.MAV_RESULT_FAILED, 0
         self.answered[slot] = _Answered(key, t, result, param2)
         if len(self.answered) > 256:
             for k in sorted(self.answered, key=lambda k: self.answered[k].at)[:128]:
@@ -212,11 +228,9 @@ class Endpoint:
 
     def _cmd_return_to_link(self, p, sender, scomp, t):
         """MAV_CMD_NAV_RETURN_TO_LINK as a command: run this one return block now, keep the stored plan."""
-        item = PlanItem(NAV_RETURN_TO_LINK, *[0.0 if math.isnan(x) else x for x in p[:4]])
-        if not (0 <= item.param1 <= 10000 and 0 <= item.param2 <= 5 and -1 <= item.param3 <= 2
-                and -1 <= item.param4 <= 1):
-            self.statustext("return to link: parameter out of range", mav.MAV_SEVERITY_WARNING)
-            return mav.MAV_RESULT_DENIED, 0
+        # the parameters were checked against link.plan_items.KINDS by _command, as an uploaded item is
+        v = item_values(NAV_RETURN_TO_LINK, MISSION_FRAME, p)
+        item = PlanItem(NAV_RETURN_TO_LINK, v[0], v[1], v[2], v[3], v[4])
         return self._verdict(self.vehicle.return_now((item,), sender, scomp, t), "return to link", sender)
 
     def _cmd_set_mode(self, p, sender, scomp, t):
@@ -353,6 +367,8 @@ class Endpoint:
             return ACCEPTED, ""
         try:
             plan = to_plan(items, self.origin)
+        except ItemError as e:  # the field named, answered with its MAV_MISSION_INVALID_PARAMn
+            return e.fault.result, str(e)
         except ValueError as e:
             return INVALID, str(e)
         error = self.vehicle.set_plan(plan, t)

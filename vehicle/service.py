@@ -13,18 +13,19 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from link.plan_items import (  # the MAV_CMD numbers of the items a plan may hold
+    LEASE_BOUNDARY,
+    NAV_LOITER_TIME,
+    NAV_RETURN_TO_LAUNCH,
+    NAV_RETURN_TO_LINK,
+    NAV_WAYPOINT,
+)
 from vehicle.lease import ExpireReason, ServiceBlock
 from vehicle.navigation import FollowerConfig, Path, follow
 from vehicle.params import Params
 from vehicle.returning import LINK_TAG_LAG_S, Route, Target, plan_route, truncate
 from vehicle.trail import Trail
 
-# MAV_CMD numbers of the items a plan may hold
-NAV_WAYPOINT = 16
-NAV_LOITER_TIME = 19
-NAV_RETURN_TO_LAUNCH = 20
-NAV_RETURN_TO_LINK = 44002
-LEASE_BOUNDARY = 44003
 SUPPORTED = (NAV_WAYPOINT, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_RETURN_TO_LINK)
 
 
