@@ -42,7 +42,7 @@ COMMAND_PARAMS: dict[int, tuple[FieldRange, ...]] = {
                                      FieldRange("index", -1, 65534, integer=True)),
     mav.MAV_CMD_LEASE_EXPIRE: _params(FieldRange("epoch", 0, 65535, integer=True),
                                       FieldRange("index", 0, 65534, integer=True)),
-    mav.MAV_CMD_DO_SET_MISSION_CURRENT: _params(FieldRange("sequence", 0, 65535, integer=True),
+    mav.MAV_CMD_DO_SET_MISSION_CURRENT: _params(FieldRange("sequence", -1, 65535, integer=True),
                                                 FieldRange("reset", 0, 1, integer=True, nan=0.0)),
 }
 
