@@ -18,6 +18,7 @@ def add_parser(sub) -> None:
     g.add_argument("--url", type=types.url, default="udpin:127.0.0.1:14550",
                    help="udpin:HOST:PORT or udpout:HOST:PORT")
     g.add_argument("--sysid", type=types.SYSID, default=255, help="this ground station's MAVLink system id")
+    g.add_argument("--compid", type=types.COMPID, default=190, help="this ground station's component id")
     g.add_argument("--target", type=types.SYSID, default=1, help="the vehicle's system id")
     g.add_argument("--timeout", type=types.SECONDS, default=10.0, help="seconds to wait for the vehicle")
     gs = g.add_subparsers(dest="gcs_command", required=True)
@@ -121,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
     if args.gcs_command == "param" and args.param_command == "load":
         _parm_file(args)
     try:
-        with Client(args.url, args.sysid, target=args.target) as c:
+        with Client(args.url, args.sysid, args.compid, target=args.target) as c:
             c.connect(args.timeout)
             cmd = args.gcs_command
             if cmd == "status":

@@ -251,8 +251,9 @@ class Fuzzer:
                 rep.frames += 1
                 if rep.frames % every == 0:
                     self._step()
-        self._sweep_ids(others)
-        while rep.frames < frames and not (stop_on_first and rep.crashes):
+        if not (stop_on_first and (rep.crashes or rep.state_changes)):
+            self._sweep_ids(others)
+        while rep.frames < frames and not (stop_on_first and (rep.crashes or rep.state_changes)):
             start_return = rng.random() < 0.05
             batch = gen.upload(OWNER) + [gen.rtl(OWNER)] if start_return else [gen.frame(OWNER)[1]]
             for data in batch:

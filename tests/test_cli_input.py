@@ -37,6 +37,7 @@ def exits_2(args: list[str], capsys) -> str:
     (["sim", "run", "tunnel", "--seed", "five"], "'five' is not a whole number"),
     (["gcs", "--sysid", "300", "status"], "system id must be within 1..255, got 300"),
     (["gcs", "--target", "0", "status"], "system id must be within 1..255, got 0"),
+    (["gcs", "--compid", "256", "status"], "component id must be within 1..255, got 256"),
     (["gcs", "--url", "udpin:127.0.0.1:99999", "status"], "port must be within"),
     (["gcs", "--url", "tcp:1.2.3.4:5", "status"], "is not udpin:HOST:PORT or udpout:HOST:PORT"),
     (["gcs", "--timeout", "0", "status"], "seconds must be > 0"),

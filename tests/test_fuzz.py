@@ -19,3 +19,12 @@ def test_no_frame_crashes_the_vehicle_and_no_stranger_changes_its_state():
     # the frames got past the framer and into the handlers: commands were answered, strangers refused
     c = fuzzer.pair.endpoint.counters
     assert c.commands > 10_000 and c.bad_frames > 1_000 and fuzzer.pair.vehicle.commands_rejected > 1_000
+
+
+def test_the_fuzzer_notices_a_stranger_changing_state(monkeypatch):
+    """The oracle itself: with the owner check removed, a non-owner's frame changes state and is reported."""
+    from vehicle.app import Vehicle
+
+    monkeypatch.setattr(Vehicle, "refuses", lambda self, sender: False)
+    rep = Fuzzer(SEED).run(20_000)
+    assert rep.state_changes and "changed the state" in rep.state_changes[0]
