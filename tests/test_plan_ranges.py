@@ -149,3 +149,37 @@ def test_ground_station_refuses_the_same_wpl_naming_file_and_line():
     with pytest.raises(PlanError, match=r"plan.txt:3: RETURN_TO_LINK param3 \(target\): 7 outside"):
         read_wpl(text, "plan.txt")
     assert len(read_wpl(text.rsplit("\n1\t", 1)[0] + "\n", "plan.txt")) == 1
+
+
+def _sent(pair: Pair, kind: str) -> list:
+    msgs = [pair.endpoint.parser.parse_buffer(f) or [] for f in pair.heard]
+    return [m for ms in msgs for m in ms if m.get_type() == kind]
+
+
+def test_a_bad_item_is_refused_as_it_arrives_and_the_rest_is_never_requested():
+    pair = owned()
+    plan = pair.vehicle.book.plan
+    pair.heard.clear()
+    tr = pair.gs.upload([item(0, NAV_RETURN_TO_LINK, 60, 0, -1, -1), item(1, NAV_RETURN_TO_LINK, 60, 0, 7, -1),
+                         item(2, NAV_LOITER_TIME, 5)])
+    pair.until(lambda: tr.done, 3, "MISSION_ACK")
+    assert tr.result == mav.MAV_MISSION_INVALID_PARAM3
+    assert sorted({m.seq for m in _sent(pair, "MISSION_REQUEST_INT")}) == [0, 1]
+    assert pair.vehicle.book.plan == plan and pair.endpoint.missions.upload is None
+
+
+@pytest.mark.parametrize("x, y, result", [(NAN, 0.0, mav.MAV_MISSION_INVALID_PARAM5_X),
+                                          (0.0, INF, mav.MAV_MISSION_INVALID_PARAM6_Y),
+                                          (1e30, 0.0, mav.MAV_MISSION_INVALID_PARAM5_X)])
+def test_a_float_mission_item_whose_position_is_no_number_is_refused_by_field(x, y, result):
+    pair = owned()
+    plan = pair.vehicle.book.plan
+    enc = mav.MAVLink(None, 255, 190)
+    pair.raw.append(mav.MAVLink_mission_count_message(1, 1, 1, 0).pack(enc))
+    pair.step(0.1)
+    pair.heard.clear()
+    pair.raw.append(mav.MAVLink_mission_item_message(1, 1, 0, 0, NAV_WAYPOINT, 0, 1, 0, 0, 0, 0, x, y, 0, 0)
+                    .pack(enc))
+    pair.step(0.1)
+    assert [a.type for a in _sent(pair, "MISSION_ACK")] == [result]
+    assert pair.vehicle.book.plan == plan and pair.endpoint.missions.upload is None

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from link import dialect
 from link.command_params import check_command, command_name, command_values
-from link.plan_items import MISSION_FRAME, NAV_RETURN_TO_LINK, ItemError
+from link.plan_items import MISSION_FRAME, MISSION_INVALID_PARAM, NAV_RETURN_TO_LINK, ItemError, ItemFault
 from link.plan_items import values as item_values
 from vehicle.app import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, Vehicle, velocity_to_command
 from vehicle.lease import Check, RejectReason, Verdict
@@ -392,9 +392,15 @@ class Endpoint:
     def _on_mission_item(self, m, sender, scomp, t):
         """The deprecated float item (MAVProxy still sends it): stored in the MISSION_ITEM_INT form."""
         scale = position_scale(m.frame)
-        x, y = _finite(m.x) * scale, _finite(m.y) * scale
-        if abs(x) > 2**31 - 1 or abs(y) > 2**31 - 1:
-            raise ValueError("position out of range")
+        mt = getattr(m, "mission_type", 0)
+        for field, v in ((5, m.x), (6, m.y)):  # the integer form cannot hold these: refuse them by field
+            if not math.isfinite(v) or abs(v * scale) > 2**31 - 1:
+                why = self.missions.refuse(sender, m.seq, mt, ItemFault(
+                    field, MISSION_INVALID_PARAM[field], f"{'xy'[field - 5]} = {v} is not a position"))
+                if why:
+                    self.statustext(why, mav.MAV_SEVERITY_WARNING)
+                return
+        x, y = m.x * scale, m.y * scale
         why = self.missions.on_item(sender, scomp, item_from_message(m, round(x), round(y)), t)
         if why:
             self.statustext(why, mav.MAV_SEVERITY_WARNING)

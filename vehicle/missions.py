@@ -170,6 +170,11 @@ class MissionServer:
         if item.seq > expected:
             self._request(up, t)  # out of order: ask again for the one we need
             return None
+        if up.mission_type == 0:  # a return-plan item is checked as it arrives: the ACK names the bad field
+            fault = check_item(item.command, item.frame, (item.param1, item.param2, item.param3, item.param4),
+                               item.x, item.y, item.z, item.current, item.autocontinue)
+            if fault is not None:
+                return self.refuse(sysid, item.seq, item.mission_type, fault)
         up.items.append(item)
         up.retries = 0
         if len(up.items) == up.count:
@@ -177,6 +182,16 @@ class MissionServer:
             return self._finish(up, t)
         self._request(up, t)
         return None
+
+    def refuse(self, sysid: int, seq: int, mission_type: int, fault: ItemFault) -> str | None:
+        """End the upload in progress from ``sysid`` at item ``seq`` with the fault's MISSION_ACK; the stored
+        list stays as it was. Returns the reason for a STATUSTEXT (None when there was no such upload)."""
+        up = self.upload
+        if up is None or up.sysid != sysid or up.mission_type != mission_type or seq != len(up.items):
+            return None
+        self.upload = None
+        self._ack(up.sysid, up.compid, fault.result, up.mission_type)
+        return f"mission item {seq} refused: {fault.message}; previous plan kept"
 
     def _finish(self, up: _Upload, t: float) -> str | None:
         items = tuple(up.items)
