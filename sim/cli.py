@@ -100,6 +100,8 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
 
     sc = _scenario(args.scenario)
     params = _parm_file(args.params)
+    if args.out:
+        _writable_dir(Path(args.out))  # the plot is written on exit: know now that it can be
     peers = tuple(args.peer) if args.peer else (("127.0.0.1", 14550), ("127.0.0.1", 14540))
     try:
         server = Server(sc, args.vehicle, args.seed, args.port, peers, args.perfect_link, params)

@@ -86,6 +86,8 @@ def test_an_unwritable_output_directory_fails_before_simulating(monkeypatch, cap
     monkeypatch.setattr(runner.Run, "run", lambda self: pytest.fail("simulated before checking --out"))
     err = exits_2(["sim", "run", "open", "--out", "/proc/x", "--quiet"], capsys)
     assert "cannot write to output directory /proc/x" in err
+    err = exits_2(["sim", "serve", "open", "--out", "/proc/x", "--port", "0"], capsys)
+    assert "cannot write to output directory /proc/x" in err
 
 
 def test_a_write_error_after_the_run_is_a_message_not_a_traceback(tmp_path, monkeypatch, capsys):
