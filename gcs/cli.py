@@ -10,34 +10,37 @@ import time
 from pathlib import Path
 
 from gcs.plans import PlanError, describe, parse_spec, read_wpl, write_wpl
+from link import args as types
 
 
 def add_parser(sub) -> None:
     g = sub.add_parser("gcs", help="talk to a returnlink vehicle as a ground station")
-    g.add_argument("--url", default="udpin:127.0.0.1:14550", help="udpin:HOST:PORT or udpout:HOST:PORT")
-    g.add_argument("--sysid", type=int, default=255, help="this ground station's MAVLink system id")
-    g.add_argument("--target", type=int, default=1, help="the vehicle's system id")
-    g.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for the vehicle")
+    g.add_argument("--url", type=types.url, default="udpin:127.0.0.1:14550",
+                   help="udpin:HOST:PORT or udpout:HOST:PORT")
+    g.add_argument("--sysid", type=types.SYSID, default=255, help="this ground station's MAVLink system id")
+    g.add_argument("--compid", type=types.COMPID, default=190, help="this ground station's component id")
+    g.add_argument("--target", type=types.SYSID, default=1, help="the vehicle's system id")
+    g.add_argument("--timeout", type=types.SECONDS, default=10.0, help="seconds to wait for the vehicle")
     g.add_argument("--key", help="signing key file (64 hex characters): sign everything, believe only the "
                    "vehicle's signed frames")
     gs = g.add_subparsers(dest="gcs_command", required=True)
     gs.add_parser("status", help="one status report")
     w = gs.add_parser("watch", help="live one-screen view (Ctrl-C to stop)")
-    w.add_argument("--seconds", type=float, default=math.inf)
+    w.add_argument("--seconds", type=types.SECONDS_OR_INF, default=math.inf)
     a = gs.add_parser("acquire", help="take operator control (the root lease)")
     a.add_argument("--allow-takeover", action="store_true", help="let another station take over")
     gs.add_parser("release", help="give operator control up")
     c = gs.add_parser("claim", help="claim an execution lease (default: the current unclaimed one)")
-    c.add_argument("index", type=int, nargs="?", default=-1)
+    c.add_argument("index", type=types.integer(-1, 65534, "lease index"), nargs="?", default=-1)
     gs.add_parser("expire", help="expire the current lease (the return plan runs)")
     gs.add_parser("rtl", help="return now (RTL)")
     gs.add_parser("hold", help="take the vehicle back and hold still")
     arm = gs.add_parser("arm", help="arm (or --disarm)")
     arm.add_argument("--disarm", action="store_true")
     d = gs.add_parser("drive", help="drive with a NED velocity for a while")
-    d.add_argument("north", type=float)
-    d.add_argument("east", type=float)
-    d.add_argument("seconds", type=float)
+    d.add_argument("north", type=types.VELOCITY)
+    d.add_argument("east", type=types.VELOCITY)
+    d.add_argument("seconds", type=types.number("seconds", 0.0, 3600.0, lo_open=True))
     plan = gs.add_parser("plan", help="the return plan").add_subparsers(dest="plan_command", required=True)
     up = plan.add_parser("upload", help="upload a QGC WPL 110 file or --spec 'rtl:50 | loiter:30 | launch'")
     up.add_argument("file", nargs="?")
@@ -53,7 +56,7 @@ def add_parser(sub) -> None:
     pg.add_argument("name", nargs="?")
     ps = param.add_parser("set")
     ps.add_argument("name")
-    ps.add_argument("value", type=float)
+    ps.add_argument("value", type=types.number("value"))
     pl = param.add_parser("load", help="set every parameter of a .parm file")
     pl.add_argument("file")
     pv = param.add_parser("save", help="save every parameter to a .parm file")
@@ -69,7 +72,18 @@ def _plan_items(args):
             raise PlanError("give a plan file or --spec")
         path = Path(args.file)
         return read_wpl(path.read_text(encoding="utf-8"), str(path))
-    except (PlanError, OSError) as e:
+    except (PlanError, OSError, UnicodeDecodeError) as e:
+        print(f"returnlink gcs: error: {e}", file=sys.stderr)
+        raise SystemExit(2) from None
+
+
+def _parm_file(args) -> None:
+    """A .parm file to load is read and checked before connecting: an error names file and line, exit 2."""
+    from vehicle.params import ParamError, parse_parm
+
+    try:
+        parse_parm(Path(args.file).read_text(encoding="utf-8"), args.file)
+    except (ParamError, OSError, UnicodeDecodeError) as e:
         print(f"returnlink gcs: error: {e}", file=sys.stderr)
         raise SystemExit(2) from None
 
@@ -116,8 +130,10 @@ def run(args: argparse.Namespace) -> int:
         except KeyFileError as e:
             print(f"returnlink gcs: error: key file {e}", file=sys.stderr)
             return 2
+    if args.gcs_command == "param" and args.param_command == "load":
+        _parm_file(args)
     try:
-        with Client(args.url, args.sysid, target=args.target, key=key) as c:
+        with Client(args.url, args.sysid, args.compid, target=args.target, key=key) as c:
             c.connect(args.timeout)
             cmd = args.gcs_command
             if cmd == "status":
@@ -184,4 +200,7 @@ def run(args: argparse.Namespace) -> int:
     except GcsError as e:
         print(f"returnlink gcs: {e}", file=sys.stderr)
         return 1
+    except OSError as e:  # a file to save to that cannot be written
+        print(f"returnlink gcs: error: {e}", file=sys.stderr)
+        return 2
     return 0

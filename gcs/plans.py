@@ -1,14 +1,25 @@
 """Return plans on the ground: QGC WPL 110 files and a short text form (``rtl:50 | loiter:30 | launch``).
 
 A plan is a list of ``vehicle.missions.Item`` in the MISSION_ITEM_INT form, exactly what goes over the wire.
+Every item is checked against the same field ranges the vehicle applies (``link.plan_items``), so a plan the
+vehicle would refuse is refused here, before it is uploaded, with the file and line or the spec word named.
 """
 
 from __future__ import annotations
 
 import math
 
-from vehicle.missions import MISSION_FRAME, Item, Origin, position_scale
-from vehicle.service import LEASE_BOUNDARY, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_RETURN_TO_LINK, NAV_WAYPOINT
+from link.plan_items import (
+    LEASE_BOUNDARY,
+    MISSION_FRAME,
+    NAV_LOITER_TIME,
+    NAV_RETURN_TO_LAUNCH,
+    NAV_RETURN_TO_LINK,
+    NAV_WAYPOINT,
+    check_item,
+    position_scale,
+)
+from vehicle.missions import Item, Origin
 
 WPL_HEADER = "QGC WPL 110"
 
@@ -17,13 +28,23 @@ class PlanError(ValueError):
     pass
 
 
+def _checked(it: Item, where: str) -> Item:
+    """The item, or PlanError naming where it came from and the field the vehicle would refuse."""
+    fault = check_item(it.command, it.frame, (it.param1, it.param2, it.param3, it.param4), it.x, it.y, it.z,
+                       it.current, it.autocontinue)
+    if fault is not None:
+        raise PlanError(f"{where}: {fault.message}")
+    return it
+
+
 def item(seq: int, command: int, p1: float = 0.0, p2: float = 0.0, p3: float = 0.0, p4: float = 0.0,
          frame: int = MISSION_FRAME, x: int = 0, y: int = 0) -> Item:
     return Item(seq, frame, command, 0, 1, p1, p2, p3, p4, x, y, 0.0, 0)
 
 
 def parse_spec(text: str, origin: Origin | None = None) -> list[Item]:
-    """``rtl[:disp[:speed[:target]]] | loiter:seconds | launch | wp:north:east``, blocks separated by ``|``."""
+    """``rtl[:disp[:speed[:target[:on_regain]]]] | loiter:seconds | launch | wp:north:east``, blocks separated
+    by ``|``. Raises PlanError naming the word and the field out of range."""
     items: list[Item] = []
     for k, block in enumerate(text.split("|")):
         if k:
@@ -34,17 +55,19 @@ def parse_spec(text: str, origin: Origin | None = None) -> list[Item]:
                 nums = [float(a) for a in args]
             except ValueError:
                 raise PlanError(f"{word!r}: arguments must be numbers") from None
-            if name == "rtl" and len(nums) <= 3:
-                p = nums + [0.0, 0.0, -1.0][len(nums):]
-                items.append(item(len(items), NAV_RETURN_TO_LINK, p[0], p[1], p[2], -1.0))
+            if name == "rtl" and len(nums) <= 4:
+                p = nums + [0.0, 0.0, -1.0, -1.0][len(nums):]
+                new = item(len(items), NAV_RETURN_TO_LINK, p[0], p[1], p[2], p[3])
             elif name == "loiter" and len(nums) == 1:
-                items.append(item(len(items), NAV_LOITER_TIME, nums[0]))
+                new = item(len(items), NAV_LOITER_TIME, nums[0])
             elif name == "launch" and not nums:
-                items.append(item(len(items), NAV_RETURN_TO_LAUNCH))
-            elif name == "wp" and len(nums) == 2:
-                items.append(item(len(items), NAV_WAYPOINT, frame=1, x=round(nums[0] * 1e4), y=round(nums[1] * 1e4)))
+                new = item(len(items), NAV_RETURN_TO_LAUNCH)
+            elif name == "wp" and len(nums) == 2 and all(math.isfinite(v) and abs(v) < 1e6 for v in nums):
+                new = item(len(items), NAV_WAYPOINT, frame=1, x=round(nums[0] * 1e4), y=round(nums[1] * 1e4))
             else:
-                raise PlanError(f"{word!r}: expected rtl[:disp[:speed[:target]]], loiter:S, launch or wp:N:E")
+                raise PlanError(f"{word!r}: expected rtl[:disp[:speed[:target[:on_regain]]]], loiter:S, launch "
+                                f"or wp:N:E")
+            items.append(_checked(new, repr(word)))
     if not items:
         raise PlanError("empty plan")
     return items
@@ -69,9 +92,10 @@ def read_wpl(text: str, source: str = "<plan>") -> list[Item]:
         if seq != len(items):
             raise PlanError(f"{source}:{n}: item {seq} out of sequence (expected {len(items)})")
         scale = position_scale(frame)
-        if not (math.isfinite(x) and math.isfinite(y)):
-            raise PlanError(f"{source}:{n}: position is not a number")
-        items.append(Item(seq, frame, cmd, cur, auto, p1, p2, p3, p4, round(x * scale), round(y * scale), z, 0))
+        if not (math.isfinite(x) and math.isfinite(y) and abs(x * scale) < 2**31 and abs(y * scale) < 2**31):
+            raise PlanError(f"{source}:{n}: position is not a number in range")
+        items.append(_checked(Item(seq, frame, cmd, cur, auto, p1, p2, p3, p4, round(x * scale), round(y * scale),
+                                   z, 0), f"{source}:{n}"))
     return items
 
 

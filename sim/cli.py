@@ -7,6 +7,9 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
+
+from link import args as types
 
 
 def _cmd_dialect(args: argparse.Namespace) -> int:
@@ -31,14 +34,46 @@ def _scenario(name: str):
 
     try:
         return load(name)
-    except (ScenarioError, OSError) as e:
+    except (ScenarioError, OSError, UnicodeDecodeError) as e:
         print(f"returnlink: error: {e}", file=sys.stderr)
         raise SystemExit(2) from None
 
 
-def _cmd_sim_run(args: argparse.Namespace) -> int:
-    from pathlib import Path
+def _fail(message: str) -> SystemExit:
+    """A bad argument or file found after parsing: the message on stderr, exit 2."""
+    print(f"returnlink: error: {message}", file=sys.stderr)
+    return SystemExit(2)
 
+
+def _writable_dir(out: Path) -> None:
+    """Create ``out`` and write a file into it now, so a bad --out fails before minutes of simulation."""
+    probe = out / ".returnlink-write-test"
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as e:
+        raise _fail(f"cannot write to output directory {out}: {e.strerror or e}") from None
+
+
+def _parm_file(path: str | None) -> Path | None:
+    """A .parm file to boot from is checked before anything runs, as strictly as the vehicle reads it at boot
+    (an empty or cut-short file too): errors by file and line, exit 2."""
+    from vehicle.params import read_parm_file
+    from vehicle.storage import StoredFileError
+
+    if path is None:
+        return None
+    p = Path(path)
+    if p.exists():
+        try:
+            read_parm_file(p)
+        except StoredFileError as e:
+            raise _fail(str(e)) from None
+    return p
+
+
+def _cmd_sim_run(args: argparse.Namespace) -> int:
     from sim import metrics, report
     from sim.runner import Run, write_metrics, write_tlog
 
@@ -46,23 +81,20 @@ def _cmd_sim_run(args: argparse.Namespace) -> int:
     kind = args.vehicle or sc.vehicle
     seed = sc.seed if args.seed is None else args.seed
     out = Path(args.out) if args.out else Path("out") / f"{sc.name}-{kind}-{seed}"
+    _writable_dir(out)
     print(f"returnlink: running {sc.name} with the {kind} (seed {seed}), {sc.duration:g} simulated s",
           file=sys.stderr)
     run = Run(sc, kind, seed, progress=not args.quiet).run()
     m = run.metrics = metrics.compute(run)
-    paths = [write_metrics(m, out / "metrics.json"), write_tlog(run, out / "run.tlog"),
-             report.trajectory(run, out / "trajectory.png"), report.timeline(run, out / "timeline.png")]
+    try:
+        paths = [write_metrics(m, out / "metrics.json"), write_tlog(run, out / "run.tlog"),
+                 report.trajectory(run, out / "trajectory.png"), report.timeline(run, out / "timeline.png")]
+    except OSError as e:  # the directory was writable a moment ago: a full disk, a removed directory
+        print(metrics.summary(run, m))
+        raise _fail(f"cannot write the results to {out}: {e}") from None
     print(metrics.summary(run, m))
     print("  wrote " + ", ".join(str(p) for p in paths))
     return 0 if m["passed"] else 1
-
-
-def _address(text: str) -> tuple[str, int]:
-    host, _, port = text.rpartition(":")
-    try:
-        return host or "127.0.0.1", int(port)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not HOST:PORT") from None
 
 
 def _epochs_file(args: argparse.Namespace):
@@ -80,15 +112,13 @@ def _epochs_file(args: argparse.Namespace):
 
 
 def _cmd_sim_serve(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
     from sim.serve import Server
     from vehicle.storage import StoredFileError
 
     sc = _scenario(args.scenario)
-    if args.speedup <= 0:
-        print("returnlink: error: --speedup must be positive", file=sys.stderr)
-        return 2
+    params = _parm_file(args.params)
+    if args.out:
+        _writable_dir(Path(args.out))  # the plot is written on exit: know now that it can be
     peers = tuple(args.peer) if args.peer else (("127.0.0.1", 14550), ("127.0.0.1", 14540))
     keystore = None
     if args.key:
@@ -107,8 +137,7 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     try:
-        server = Server(sc, args.vehicle, args.seed, args.port, peers, args.perfect_link,
-                        Path(args.params) if args.params else None, keystore, epochs)
+        server = Server(sc, args.vehicle, args.seed, args.port, peers, args.perfect_link, params, keystore, epochs)
     except StoredFileError as e:  # a damaged kept file: refuse to start rather than boot on defaults
         print(f"returnlink: error: {e}", file=sys.stderr)
         return 2
@@ -132,7 +161,10 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
     finally:
         server.close()
         out = Path(args.out) if args.out else Path("out") / f"serve-{sc.name}-{server.kind}"
-        print(f"returnlink: wrote {server.plot(out / 'trajectory.png')}", file=sys.stderr)
+        try:
+            print(f"returnlink: wrote {server.plot(out / 'trajectory.png')}", file=sys.stderr)
+        except OSError as e:
+            raise _fail(f"cannot write the plot to {out}: {e}") from None
     return 0
 
 
@@ -168,7 +200,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim = sub.add_parser("sim", help="the simulator").add_subparsers(dest="sim_command", required=True)
     run = sim.add_parser("run", help="run a scenario in lockstep, as fast as possible")
     run.add_argument("scenario", help="a built-in scenario name or a .toml file")
-    run.add_argument("--seed", type=int, help="random seed (default: the scenario's)")
+    run.add_argument("--seed", type=types.SEED, help="random seed (default: the scenario's)")
     run.add_argument("--vehicle", choices=["rover", "legged"], help="robot model (default: the scenario's)")
     run.add_argument("--out", help="output directory (default: out/SCENARIO-VEHICLE-SEED)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -176,13 +208,14 @@ def build_parser() -> argparse.ArgumentParser:
     serve = sim.add_parser("serve", help="run a scenario in real time over UDP for MAVSDK, MAVProxy, QGC")
     serve.add_argument("scenario", help="a built-in scenario name or a .toml file")
     serve.add_argument("--vehicle", choices=["rover", "legged"], help="robot model (default: the scenario's)")
-    serve.add_argument("--seed", type=int)
-    serve.add_argument("--speedup", type=float, default=1.0, help="run K times faster than real time")
-    serve.add_argument("--port", type=int, default=14580, help="UDP port the vehicle listens on")
-    serve.add_argument("--peer", type=_address, action="append",
+    serve.add_argument("--seed", type=types.SEED)
+    serve.add_argument("--speedup", type=types.SPEEDUP, default=1.0, help="run K times faster than real time")
+    serve.add_argument("--port", type=types.LISTEN_PORT, default=14580, help="UDP port the vehicle listens on")
+    serve.add_argument("--peer", type=types.address, action="append",
                        help="HOST:PORT to send to before anyone talks (default 127.0.0.1:14550 and :14540)")
     serve.add_argument("--perfect-link", action="store_true", help="no radio model: every packet arrives")
-    serve.add_argument("--duration", type=float, default=float("inf"), help="stop after this many simulated s")
+    serve.add_argument("--duration", type=types.SECONDS_OR_INF, default=float("inf"),
+                       help="stop after this many simulated s")
     serve.add_argument("--params", help=".parm file to boot from and save parameter changes to")
     serve.add_argument("--state", help="directory for the epochs kept across restarts (default: beside --params, "
                                        "else $XDG_STATE_HOME/returnlink)")

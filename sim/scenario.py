@@ -1,10 +1,13 @@
 """Scenario files (TOML): the place, the robot, the operator's script and what counts as success.
 
-Every error names the file, the line and the field, because a scenario is written by hand.
+Every error names the file, the line and the field, because a scenario is written by hand: an unknown key
+(with the closest known one), NaN or infinity anywhere, a value out of its range, a vehicle parameter the vehicle
+would refuse. A misspelt key silently ignored is a scenario that does not test what its author thinks it tests.
 """
 
 from __future__ import annotations
 
+import difflib
 import math
 import re
 import sys
@@ -13,16 +16,21 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from link.radio import RadioParams
-from sim.world import Station, Wall, World
-from vehicle.service import (
+from link.plan_items import (
     LEASE_BOUNDARY,
+    LOCAL_FRAMES,
+    MISSION_FRAME,
     NAV_LOITER_TIME,
     NAV_RETURN_TO_LAUNCH,
     NAV_RETURN_TO_LINK,
     NAV_WAYPOINT,
-    PlanItem,
+    check_fields,
 )
+from link.radio import RadioParams
+from sim.world import Station, Wall, World
+from vehicle.lease import ExpireReason
+from vehicle.params import BY_NAME, ParamError, validate
+from vehicle.service import PlanItem
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -34,6 +42,10 @@ BUILTIN = ("tunnel", "warehouse", "loop", "open", "handover")
 PLAN_COMMANDS = {"RETURN_TO_LINK": NAV_RETURN_TO_LINK, "BOUNDARY": LEASE_BOUNDARY, "LOITER": NAV_LOITER_TIME,
                  "RETURN_TO_LAUNCH": NAV_RETURN_TO_LAUNCH, "WAYPOINT": NAV_WAYPOINT}
 EVENT_ACTIONS = ("jam", "unjam", "kill_gcs", "revive_gcs", "takeover", "rtl", "param", "claim", "stop")
+# the keys of each plan command, by the field of link.plan_items.KINDS they fill (1..4 = param1..4, 5/6 = x/y)
+PLAN_KEYS = {NAV_RETURN_TO_LINK: {"max_displacement": 1, "speed": 2, "target": 3, "on_regain": 4},
+             NAV_LOITER_TIME: {"time": 1}, NAV_WAYPOINT: {"x": 5, "y": 6}}
+SEED_MAX = 2**32 - 1
 
 
 class ScenarioError(ValueError):
@@ -120,12 +132,16 @@ class _Reader:
                 key = re.compile(rf"^\s*{re.escape(name)}\s*=")
                 for i in range(start, len(self.lines)):
                     if key.match(self.lines[i]):
-                        return i + 1
+                        return self._inline_item(i, int(idx)) + 1
                 return start + 1 if start else None
             if is_last:
                 key = re.compile(rf"^\s*{re.escape(name)}\s*=")
                 for i in range(start, len(self.lines)):
                     if key.match(self.lines[i]):
+                        return i + 1
+                inline = re.compile(rf"[{{,]\s*{re.escape(name)}\s*=")  # a key of an inline table
+                for i in range(start, len(self.lines)):
+                    if inline.search(self.lines[i]):
                         return i + 1
                 return start + 1 if start else None
             pat = re.compile(rf"^\s*\[\s*{re.escape(table)}\s*\]")
@@ -135,8 +151,57 @@ class _Reader:
                     break
         return start + 1 if start else None
 
+    def _inline_item(self, i: int, idx: int) -> int:
+        """The line of the idx-th ``{...}`` of an inline array whose key is on line ``i`` (or i)."""
+        seen = -1
+        for j in range(i, len(self.lines)):
+            seen += self.lines[j].split("#", 1)[0].count("{")
+            if seen >= idx:
+                return j
+            if j > i and "=" in self.lines[j].split("#", 1)[0] and "{" not in self.lines[j]:
+                break  # the next key: the array has fewer items
+        return i
+
     def fail(self, path: str, message: str) -> ScenarioError:
         return ScenarioError(self.file, self.line_of(path), path, message)
+
+    def known(self, d: dict[str, Any], path: str, keys: Any) -> None:
+        """Every key of table ``d`` must be one of ``keys``; an unknown one is named with the closest known key."""
+        keys = sorted(keys)
+        for k in d:
+            if k not in keys:
+                close = difflib.get_close_matches(k, keys, 1, 0.6)
+                hint = f"; did you mean {close[0]!r}?" if close else ""
+                raise self.fail(f"{path}.{k}" if path else k,
+                                f"unknown field{hint} (expected one of {', '.join(keys)})")
+
+    def finite(self, v: Any, path: str) -> None:
+        """NaN or infinity anywhere in the file is an error: TOML allows them, no field of a scenario does."""
+        if isinstance(v, float) and not math.isfinite(v):
+            raise self.fail(path, f"must be a finite number, got {v}")
+        if isinstance(v, dict):
+            for k, x in v.items():
+                self.finite(x, f"{path}.{k}" if path else k)
+        elif isinstance(v, list):
+            for k, x in enumerate(v):
+                # arrays of tables are addressed by index; a number inside a list of points by the list's key
+                self.finite(x, f"{path}[{k}]" if isinstance(x, dict) else path)
+
+    def table(self, d: dict[str, Any], key: str, path: str, keys: Any, default: Any = ...) -> dict[str, Any]:
+        """A sub-table whose keys must all be known."""
+        v = self.get(d, key, path, dict, default)
+        if isinstance(v, dict):
+            self.known(v, path, keys)
+        return v
+
+    def tables(self, d: dict[str, Any], key: str, path: str, keys: Any) -> list[dict[str, Any]]:
+        """An array of tables whose keys must all be known."""
+        out = self.get(d, key, path, list, [])
+        for k, v in enumerate(out):
+            if not isinstance(v, dict):
+                raise self.fail(f"{path}[{k}]", f"must be a table, got {v!r}")
+            self.known(v, f"{path}[{k}]", keys)
+        return out
 
     def get(self, d: dict[str, Any], key: str, path: str, kind: type | tuple[type, ...], default: Any = ...) -> Any:
         if key not in d:
@@ -180,29 +245,33 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
         m = re.search(r"line (\d+)", str(e))
         raise ScenarioError(file, int(m.group(1)) if m else None, "", f"not valid TOML: {e}") from None
     r = _Reader(file, text)
-    known = {"name", "description", "duration", "seed", "vehicle", "world", "radio", "start", "operator",
-             "events", "criteria"}
-    for k in raw:
-        if k not in known:
-            raise r.fail(k, f"unknown field (expected one of {', '.join(sorted(known))})")
+    r.known(raw, "", ("name", "description", "duration", "seed", "vehicle", "world", "radio", "start", "operator",
+                      "events", "criteria"))
+    r.finite(raw, "")
     name = r.get(raw, "name", "name", str)
     vehicle = r.get(raw, "vehicle", "vehicle", str, "rover")
     if vehicle not in ("rover", "legged"):
         raise r.fail("vehicle", f"must be rover or legged, got {vehicle!r}")
-    world = r.get(raw, "world", "world", dict)
+    seed = r.get(raw, "seed", "seed", int, 1)
+    if not 0 <= seed <= SEED_MAX:
+        raise r.fail("seed", f"must be within 0..{SEED_MAX}, got {seed}")
+    world = r.table(raw, "world", "world", ("bounds", "walls", "denied", "stations"))
     b = r.get(world, "bounds", "world.bounds", list)
     if len(b) != 4 or not all(isinstance(c, (int, float)) for c in b) or b[0] >= b[2] or b[1] >= b[3]:
         raise r.fail("world.bounds", "must be [xmin, ymin, xmax, ymax] with min < max")
     walls = []
-    for k, w in enumerate(r.get(world, "walls", "world.walls", list, [])):
+    for k, w in enumerate(r.tables(world, "walls", "world.walls", ("points", "thickness", "attenuation_db"))):
         p = f"world.walls[{k}]"
-        walls.append(Wall(r.points(w, "points", f"{p}.points"),
-                          r.number(w, "thickness", f"{p}.thickness", 0.5, 0.01, 20.0),
+        points = r.points(w, "points", f"{p}.points")
+        for j in range(1, len(points)):
+            if points[j] == points[j - 1]:
+                raise r.fail(f"{p}.points", f"points {j - 1} and {j} are the same: a wall of zero length")
+        walls.append(Wall(points, r.number(w, "thickness", f"{p}.thickness", 0.5, 0.01, 20.0),
                           r.number(w, "attenuation_db", f"{p}.attenuation_db", 20.0, 0.0, 200.0)))
     denied = tuple(r.points(z, "polygon", f"world.denied[{k}].polygon", min_len=3)
-                   for k, z in enumerate(r.get(world, "denied", "world.denied", list, [])))
+                   for k, z in enumerate(r.tables(world, "denied", "world.denied", ("polygon",))))
     stations = []
-    for k, s in enumerate(r.get(world, "stations", "world.stations", list, [])):
+    for k, s in enumerate(r.tables(world, "stations", "world.stations", ("name", "position", "sysid", "power_dbm"))):
         p = f"world.stations[{k}]"
         x, y = r.point(r.get(s, "position", f"{p}.position", list), f"{p}.position")
         sysid = r.get(s, "sysid", f"{p}.sysid", int, 255)
@@ -212,18 +281,15 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
                                 r.number(s, "power_dbm", f"{p}.power_dbm", 20.0, -30.0, 40.0)))
     if not stations:
         raise r.fail("world.stations", "needs at least one ground station")
-    radio_raw = r.get(raw, "radio", "radio", dict, {})
+    radio_raw = r.table(raw, "radio", "radio", RadioParams.__dataclass_fields__, {})
     radio_kw = {}
     for fname in RadioParams.__dataclass_fields__:
         if fname in radio_raw:
             radio_kw[fname] = r.number(radio_raw, fname, f"radio.{fname}")
-    for k in radio_raw:
-        if k not in RadioParams.__dataclass_fields__:
-            raise r.fail(f"radio.{k}", "unknown radio field")
-    start_raw = r.get(raw, "start", "start", dict)
+    start_raw = r.table(raw, "start", "start", ("position", "yaw_deg"))
     sx, sy = r.point(r.get(start_raw, "position", "start.position", list), "start.position")
     syaw = math.radians(r.number(start_raw, "yaw_deg", "start.yaw_deg", 0.0, -360, 360))
-    op = r.get(raw, "operator", "operator", dict)
+    op = r.table(raw, "operator", "operator", ("station", "teleop", "route", "resume_route", "plan", "params"))
     op_station = r.get(op, "station", "operator.station", str, stations[0].name)
     if op_station not in {s.name for s in stations}:
         raise r.fail("operator.station", f"no station named {op_station!r}")
@@ -244,6 +310,7 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
         if cmd not in PLAN_COMMANDS:
             raise r.fail(f"{p}.command", f"unknown plan command {cmd!r} (one of {', '.join(PLAN_COMMANDS)})")
         num = PLAN_COMMANDS[cmd]
+        r.known(it, p, ("command", *PLAN_KEYS.get(num, ())))
         if num == NAV_RETURN_TO_LINK:
             plan.append(PlanItem(num, r.number(it, "max_displacement", f"{p}.max_displacement", 0.0, 0, 10000),
                                  r.number(it, "speed", f"{p}.speed", 0.0, 0, 5),
@@ -255,10 +322,13 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
             plan.append(PlanItem(num, x=r.number(it, "x", f"{p}.x"), y=r.number(it, "y", f"{p}.y")))
         else:
             plan.append(PlanItem(num))
+        _check_plan_item(r, plan[-1], p)
     params_raw = r.get(op, "params", "operator.params", dict, {})
-    params = {k: r.number(params_raw, k, f"operator.params.{k}") for k in params_raw}
+    params = {k: _param(r, k, r.number(params_raw, k, f"operator.params.{k}"), f"operator.params.{k}")
+              for k in params_raw}
     events = []
-    for k, ev in enumerate(r.get(raw, "events", "events", list, [])):
+    for k, ev in enumerate(r.tables(raw, "events", "events", ("t", "action", "duration", "station", "name",
+                                                                "value"))):
         p = f"events[{k}]"
         action = r.get(ev, "action", f"{p}.action", str)
         if action not in EVENT_ACTIONS:
@@ -266,10 +336,18 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
         st = r.get(ev, "station", f"{p}.station", str, "")
         if st and st not in {s.name for s in stations}:
             raise r.fail(f"{p}.station", f"no station named {st!r}")
-        events.append(Event(r.number(ev, "t", f"{p}.t", lo=0.0), action,
-                            r.number(ev, "duration", f"{p}.duration", 0.0, 0.0), st,
-                            r.get(ev, "name", f"{p}.name", str, ""), r.number(ev, "value", f"{p}.value", 0.0)))
-    crit_raw = r.get(raw, "criteria", "criteria", dict, {})
+        event = Event(r.number(ev, "t", f"{p}.t", lo=0.0), action,
+                      r.number(ev, "duration", f"{p}.duration", 0.0, 0.0), st,
+                      r.get(ev, "name", f"{p}.name", str, ""), r.number(ev, "value", f"{p}.value", 0.0))
+        if action == "param":
+            _param(r, event.name, event.value, f"{p}.name")
+        events.append(event)
+    crit_raw = r.table(raw, "criteria", "criteria", Criteria.__dataclass_fields__, {})
+    reasons = r.get(crit_raw, "chain_reasons", "criteria.chain_reasons", list, [])
+    for reason in reasons:
+        if reason not in ExpireReason.__members__:
+            raise r.fail("criteria.chain_reasons", f"unknown reason {reason!r} "
+                                                   f"(one of {', '.join(ExpireReason.__members__)})")
     crit = Criteria(
         r.get(crit_raw, "return_started", "criteria.return_started", bool, None),
         r.get(crit_raw, "link_regained", "criteria.link_regained", bool, None),
@@ -278,16 +356,38 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
         r.get(crit_raw, "max_displacement_respected", "criteria.max_displacement_respected", bool, True),
         r.number(crit_raw, "min_distance_back_m", "criteria.min_distance_back_m", None, 0),
         int(r.number(crit_raw, "min_commands_rejected", "criteria.min_commands_rejected", 0, 0)),
-        tuple(r.get(crit_raw, "chain_reasons", "criteria.chain_reasons", list, [])),
+        tuple(reasons),
     )
     return Scenario(
         name=name, description=r.get(raw, "description", "description", str, ""), file=file,
         duration=r.number(raw, "duration", "duration", lo=1.0, hi=36000.0),
-        seed=r.get(raw, "seed", "seed", int, 1), vehicle=vehicle, bounds=tuple(float(c) for c in b),
+        seed=seed, vehicle=vehicle, bounds=tuple(float(c) for c in b),
         walls=tuple(walls), denied=denied, stations=tuple(stations), radio=RadioParams(**radio_kw),
         start=(sx, sy, syaw), operator_station=op_station, teleop=teleop, route=route, resume_route=resume,
         plan=tuple(plan), params=params, events=tuple(sorted(events, key=lambda e: e.t)), criteria=crit,
     )
+
+
+def _check_plan_item(r: _Reader, item: PlanItem, path: str) -> None:
+    """The same field ranges the vehicle checks a mission item against (link/plan_items.py)."""
+    frame = LOCAL_FRAMES[0] if item.command == NAV_WAYPOINT else MISSION_FRAME
+    fault = check_fields(item.command, frame, (item.param1, item.param2, item.param3, item.param4, item.x, item.y,
+                                               0.0))
+    if fault is not None:
+        keys = {v: k for k, v in PLAN_KEYS.get(item.command, {}).items()}
+        raise r.fail(f"{path}.{keys[fault.field]}" if fault.field in keys else path, fault.message)
+
+
+def _param(r: _Reader, name: str, value: float, path: str) -> float:
+    """A vehicle parameter as the vehicle would take it: a known name, within its range."""
+    if name not in BY_NAME:
+        close = difflib.get_close_matches(name, list(BY_NAME), 1, 0.6)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        raise r.fail(path, f"no vehicle parameter {name!r}{hint}")
+    try:
+        return validate(name, value)
+    except ParamError as e:
+        raise r.fail(path, str(e)) from None
 
 
 def load(name_or_path: str) -> Scenario:

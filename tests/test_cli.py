@@ -41,7 +41,7 @@ def test_sim_run_writes_metrics_tlog_and_plots(tmp_path):
 @pytest.mark.parametrize("args, needle", [
     (["sim", "run", "nowhere"], "no such scenario"),
     (["sim", "run", "tunnel", "--vehicle", "hovercraft"], "invalid choice"),
-    (["sim", "serve", "tunnel", "--speedup", "0"], "--speedup must be positive"),
+    (["sim", "serve", "tunnel", "--speedup", "0"], "--speedup: speedup must be > 0"),
     (["gcs", "plan", "show", "--spec", "fly:3"], "expected rtl"),
     (["gcs", "plan", "upload", "/no/such/plan.txt"], "No such file"),
 ])

@@ -98,7 +98,7 @@ def test_a_restart_never_executes_a_delayed_claim_from_before_it(tmp_path):
 
 def test_sim_serve_refuses_to_start_on_a_damaged_epochs_file(tmp_path, capsys):
     (tmp_path / "returnlink.epochs").write_text(HEADER + "\n12 1")
-    code = main(["sim", "serve", "open", "--port", "0", "--state", str(tmp_path), "--duration", "0"])
+    code = main(["sim", "serve", "open", "--port", "0", "--state", str(tmp_path), "--duration", "1"])
     assert code == 2 and "returnlink.epochs:2: incomplete last line" in capsys.readouterr().err
 
 

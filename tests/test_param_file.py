@@ -86,7 +86,10 @@ def test_a_damaged_parm_file_is_refused_at_boot_by_name_and_line(tmp_path, capsy
     with pytest.raises(StoredFileError) as e:
         read_parm_file(path)
     assert e.value.line == line and what in e.value.what
-    code = main(["sim", "serve", "tunnel", "--port", "0", "--params", str(path), "--duration", "0"])
+    try:  # refused while checking the arguments (SystemExit) or while booting (return code): exit 2 either way
+        code = main(["sim", "serve", "tunnel", "--port", "0", "--params", str(path), "--duration", "1"])
+    except SystemExit as exit_:
+        code = exit_.code
     err = capsys.readouterr().err
     assert code == 2 and f"vehicle.parm:{line}: " in err and what in err
     assert path.read_text() == text  # left as found, for whoever investigates

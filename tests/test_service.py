@@ -16,6 +16,7 @@ from vehicle.service import (
     NAV_LOITER_TIME,
     NAV_RETURN_TO_LAUNCH,
     NAV_RETURN_TO_LINK,
+    NAV_WAYPOINT,
     PlanItem,
     blocks_from_items,
     default_plan,
@@ -116,3 +117,11 @@ def test_stuck_against_a_wall():
     block = blocks_from_items([PlanItem(16, x=61.2, y=21.2)], params)[0]
     res, _ = run_block(rig, block, params, limit=120.0)
     assert res.finished is ExpireReason.STUCK
+
+
+def test_blocks_refuse_an_item_the_service_could_not_run():
+    params = Params()
+    for bad in (PlanItem(NAV_RETURN_TO_LINK, 50, 0, 7), PlanItem(NAV_RETURN_TO_LINK, -1),
+                PlanItem(NAV_LOITER_TIME, float("nan")), PlanItem(NAV_WAYPOINT, x=float("inf"))):
+        with pytest.raises(ValueError, match="item 0: "):
+            blocks_from_items([bad], params)

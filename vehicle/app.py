@@ -150,6 +150,7 @@ class Vehicle:
         # counters for the record: rejections are never silent, stale executions must stay 0
         self.commands_rejected = 0
         self.stale_commands_executed = 0
+        self.service_faults = 0  # return blocks ended because the service raised (each reported, never fatal)
 
     # ----- lease transitions -------------------------------------------------------------------------------
     def _apply(self, out: Outcome) -> None:
@@ -406,11 +407,16 @@ class Vehicle:
         self.setpoint = None
         link_lost = book.link.lost
         fresh = self.service is None or self.service_index != cur.index
+        try:
+            if fresh:
+                step = start_block(cur.block, x, y, t, self.trail, self.params, link_lost, self.outbound_speed)
+            else:
+                step = step_block(self.service, x, y, yaw, t, self.trail, self.params, link_lost,
+                                  self.outbound_speed)
+        except Exception as e:  # noqa: BLE001 - the return runs when nobody can restart the vehicle
+            return self._service_fault(cur.index, e, t)
         if fresh:
-            step = start_block(cur.block, x, y, t, self.trail, self.params, link_lost, self.outbound_speed)
             self.service_index = cur.index
-        else:
-            step = step_block(self.service, x, y, yaw, t, self.trail, self.params, link_lost, self.outbound_speed)
         if step.replanned and book.current_id is not None:
             if not fresh and self.service is not None:
                 self.reached.append(self.service.items[self.service.item].seq)
@@ -423,6 +429,17 @@ class Vehicle:
             self._apply(self.book.finish(cur.index, step.finished, t))
             return 0.0, 0.0
         return step.speed, step.yaw_rate
+
+    def _service_fault(self, index: int, error: Exception, t: float) -> tuple[float, float]:
+        """The return service raised: end its block as STUCK (the next block of the chain, or a fresh operator
+        lease, takes over), hold still this tick, and say so. A fault here must never end the process: the
+        return runs exactly when the link is gone and nobody could restart it."""
+        self.service_faults += 1
+        self.service, self.service_index = None, None
+        self.notices.append(f"return service fault in lease {index}: {type(error).__name__}: {error}; "
+                            f"block ended, holding")
+        self._apply(self.book.finish(index, ExpireReason.STUCK, t))
+        return 0.0, 0.0
 
     def _teleop(self, t: float) -> tuple[float, float]:
         sp = self.setpoint

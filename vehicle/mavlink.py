@@ -16,6 +16,9 @@ from enum import Enum
 from pathlib import Path
 
 from link import dialect
+from link.command_params import check_command, command_name, command_values
+from link.plan_items import MISSION_FRAME, MISSION_INVALID_PARAM, NAV_RETURN_TO_LINK, ItemError, ItemFault
+from link.plan_items import values as item_values
 from link.signing import MAX_TIMESTAMP, Key, Streams, advance, enable, sim_stamp, timestamp_of
 from link.signing import Verdict as SignVerdict
 from vehicle.app import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, Vehicle, velocity_to_command
@@ -36,7 +39,7 @@ from vehicle.missions import (
 from vehicle.modes import decode_mode
 from vehicle.params import SPECS, ParamError, save_parm
 from vehicle.retries import RetryWindow, command_key
-from vehicle.service import NAV_RETURN_TO_LINK, PlanItem
+from vehicle.service import PlanItem
 from vehicle.telemetry import Telemetry, wire_index
 
 mav = dialect.load()
@@ -79,6 +82,7 @@ class Counters:
     command_retries: int = 0
     unsupported: int = 0
     signing: Counter = field(default_factory=Counter)  # frames per signing Verdict, with a key installed
+    handler_faults: int = 0  # a message whose handling raised: reported and counted, never fatal
 
 
 class Endpoint:
@@ -238,6 +242,9 @@ class Endpoint:
             # a well-framed message with absurd content: refuse it, keep running, keep state
             self.counters.bad_frames += 1
             self.statustext(f"ignored {m.get_type()}: {e}", mav.MAV_SEVERITY_WARNING)
+        except Exception as e:  # noqa: BLE001 - a fault in one handler must never take the vehicle down
+            self.counters.handler_faults += 1
+            self.statustext(f"fault handling {m.get_type()}: {type(e).__name__}: {e}", mav.MAV_SEVERITY_ERROR)
 
     def pinned(self) -> list[Hashable]:
         """Addresses the transport must never drop from its peer table: the owner's and, with a key installed,
@@ -274,15 +281,24 @@ class Endpoint:
             return
         self.counters.commands += 1
         handler = COMMANDS.get(command)
+        bad_param = check_command(command, p) if handler is not None else None
         if handler is None:
             self.counters.unsupported += 1
             result, param2 = mav.MAV_RESULT_UNSUPPORTED, 0
+        elif bad_param is not None:  # out of range, NaN or infinite where it matters: never half-executed
+            self.statustext(f"refused: {bad_param}", mav.MAV_SEVERITY_WARNING)
+            result, param2 = mav.MAV_RESULT_DENIED, 0
         else:
             try:
-                result, param2 = handler(self, p, sender, scomp, t)
+                result, param2 = handler(self, command_values(command, p), sender, scomp, t)
             except (ValueError, OverflowError) as e:  # NaN or infinity where a number is needed
-                self.statustext(f"command {command} refused: {e}", mav.MAV_SEVERITY_WARNING)
+                self.statustext(f"{command_name(command)} refused: {e}", mav.MAV_SEVERITY_WARNING)
                 result, param2 = mav.MAV_RESULT_DENIED, 0
+            except Exception as e:  # noqa: BLE001 - answered FAILED, counted, and the vehicle keeps running
+                self.counters.handler_faults += 1
+                self.statustext(f"fault in {command_name(command)}: {type(e).__name__}: {e}",
+                                mav.MAV_SEVERITY_ERROR)
+                result, param2 = mav.MAV_RESULT_FAILED, 0
         self.answered.remember(key, result, param2, t)
         self._ack(command, result, param2, sender, scomp)
 
@@ -306,11 +322,9 @@ class Endpoint:
 
     def _cmd_return_to_link(self, p, sender, scomp, t):
         """MAV_CMD_NAV_RETURN_TO_LINK as a command: run this one return block now, keep the stored plan."""
-        item = PlanItem(NAV_RETURN_TO_LINK, *[0.0 if math.isnan(x) else x for x in p[:4]])
-        if not (0 <= item.param1 <= 10000 and 0 <= item.param2 <= 5 and -1 <= item.param3 <= 2
-                and -1 <= item.param4 <= 1):
-            self.statustext("return to link: parameter out of range", mav.MAV_SEVERITY_WARNING)
-            return mav.MAV_RESULT_DENIED, 0
+        # the parameters were checked against link.plan_items.KINDS by _command, as an uploaded item is
+        v = item_values(NAV_RETURN_TO_LINK, MISSION_FRAME, p)
+        item = PlanItem(NAV_RETURN_TO_LINK, v[0], v[1], v[2], v[3], v[4])
         return self._verdict(self.vehicle.return_now((item,), sender, scomp, t), "return to link", sender)
 
     def _cmd_set_mode(self, p, sender, scomp, t):
@@ -454,6 +468,8 @@ class Endpoint:
             return ACCEPTED, ""
         try:
             plan = to_plan(items, self.origin)
+        except ItemError as e:  # the field named, answered with its MAV_MISSION_INVALID_PARAMn
+            return e.fault.result, str(e)
         except ValueError as e:
             return INVALID, str(e)
         error = self.vehicle.set_plan(plan, t)
@@ -477,9 +493,15 @@ class Endpoint:
     def _on_mission_item(self, m, sender, scomp, t):
         """The deprecated float item (MAVProxy still sends it): stored in the MISSION_ITEM_INT form."""
         scale = position_scale(m.frame)
-        x, y = _finite(m.x) * scale, _finite(m.y) * scale
-        if abs(x) > 2**31 - 1 or abs(y) > 2**31 - 1:
-            raise ValueError("position out of range")
+        mt = getattr(m, "mission_type", 0)
+        for fld, v in ((5, m.x), (6, m.y)):  # the integer form cannot hold these: refuse them by field
+            if not math.isfinite(v) or abs(v * scale) > 2**31 - 1:
+                why = self.missions.refuse(sender, m.seq, mt, ItemFault(
+                    fld, MISSION_INVALID_PARAM[fld], f"{'xy'[fld - 5]} = {v} is not a position"))
+                if why:
+                    self.statustext(why, mav.MAV_SEVERITY_WARNING)
+                return
+        x, y = m.x * scale, m.y * scale
         why = self.missions.on_item(sender, scomp, item_from_message(m, round(x), round(y)), t)
         if why:
             self.statustext(why, mav.MAV_SEVERITY_WARNING)

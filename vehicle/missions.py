@@ -11,19 +11,29 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from vehicle.service import NAV_WAYPOINT, PlanItem
+from link.plan_items import (  # noqa: F401 - re-exported for existing importers
+    GLOBAL_FRAMES,
+    LOCAL_FRAMES,
+    MAX_DISPLACEMENT,
+    MISSION_FRAME,
+    NAV_WAYPOINT,
+    ItemError,
+    ItemFault,
+    check_item,
+    position_scale,
+    values,
+)
+from vehicle.service import PlanItem
 
 ITEM_TIMEOUT = 0.5  # s before an item is requested again
 ITEM_RETRIES = 5
 MAX_ITEMS = 500
 EARTH_R = 6378137.0
+MAX_WAYPOINT_DISTANCE = MAX_DISPLACEMENT  # m from the origin
 
 # MAV_MISSION_RESULT
 ACCEPTED, ERROR, UNSUPPORTED_FRAME, UNSUPPORTED, NO_SPACE, INVALID = 0, 1, 2, 3, 4, 5
 INVALID_SEQUENCE, DENIED, OPERATION_CANCELLED = 13, 14, 15
-GLOBAL_FRAMES = (0, 3, 5, 6, 10, 11)  # MAV_FRAME_GLOBAL*, x/y are lat/lon (degE7 in MISSION_ITEM_INT)
-LOCAL_FRAMES = (1, 7)  # MAV_FRAME_LOCAL_NED / LOCAL_ENU is not accepted; x/y are metres * 1e4
-MISSION_FRAME = 2
 
 
 @dataclass(frozen=True)
@@ -64,11 +74,6 @@ class Origin:
         return x, y
 
 
-def position_scale(frame: int) -> float:
-    """What MISSION_ITEM_INT (and a QGC WPL file, after scaling) multiplies x/y by in this frame."""
-    return 1e7 if frame in GLOBAL_FRAMES else (1e4 if frame in LOCAL_FRAMES else 1.0)
-
-
 def item_from_message(m, x: int | None = None, y: int | None = None) -> Item:
     """A MISSION_ITEM_INT (or a MISSION_ITEM with its x/y already scaled) as an ``Item``."""
     return Item(m.seq, m.frame, m.command, m.current, m.autocontinue, m.param1, m.param2, m.param3, m.param4,
@@ -76,27 +81,28 @@ def item_from_message(m, x: int | None = None, y: int | None = None) -> Item:
 
 
 def to_plan(items: tuple[Item, ...], origin: Origin) -> tuple[PlanItem, ...]:
-    """Mission items -> return-plan items in the local frame. Raises ValueError naming an unusable item."""
+    """Mission items -> return-plan items in the local frame.
+
+    Every field is checked against ``link.plan_items.KINDS`` first: raises ``ItemError`` naming the item, the
+    field and the MAV_MISSION_RESULT to answer with, so an unusable plan is refused at upload, never at return.
+    """
     out = []
     for it in items:
-        x, y = float(it.x), float(it.y)
-        if it.command == NAV_WAYPOINT:
-            if it.frame in GLOBAL_FRAMES:
-                x, y = origin.to_local(it.x / 1e7, it.y / 1e7)
-            elif it.frame in LOCAL_FRAMES:
-                x, y = it.x / 1e4, it.y / 1e4
-            else:
-                raise ValueError(f"item {it.seq}: frame {it.frame} is not supported for a waypoint")
-        for p in (it.param1, it.param2, it.param3, it.param4):
-            if not math.isfinite(p) and not math.isnan(p):
-                raise ValueError(f"item {it.seq}: parameter out of range")
-        out.append(PlanItem(it.command, _num(it.param1, 0.0), _num(it.param2, 0.0), _num(it.param3, -1.0),
-                            _num(it.param4, -1.0), x, y, it.seq))
+        fault = check_item(it.command, it.frame, (it.param1, it.param2, it.param3, it.param4), it.x, it.y, it.z,
+                           it.current, it.autocontinue)
+        if fault is not None:
+            raise ItemError(it.seq, fault)
+        scale = position_scale(it.frame)
+        p = values(it.command, it.frame, (it.param1, it.param2, it.param3, it.param4, it.x / scale, it.y / scale,
+                                          it.z))
+        x, y = p[4], p[5]
+        if it.command == NAV_WAYPOINT and it.frame in GLOBAL_FRAMES:
+            x, y = origin.to_local(x, y)
+            if math.hypot(x, y) > MAX_WAYPOINT_DISTANCE:
+                raise ItemError(it.seq, ItemFault(5, 10, f"WAYPOINT at {math.hypot(x, y):.0f} m from the origin: "
+                                                         f"at most {MAX_WAYPOINT_DISTANCE:g} m"))
+        out.append(PlanItem(it.command, p[0], p[1], p[2], p[3], x, y, it.seq))
     return tuple(out)
-
-
-def _num(v: float, default: float) -> float:
-    return default if math.isnan(v) else float(v)
 
 
 @dataclass
@@ -164,6 +170,11 @@ class MissionServer:
         if item.seq > expected:
             self._request(up, t)  # out of order: ask again for the one we need
             return None
+        if up.mission_type == 0:  # a return-plan item is checked as it arrives: the ACK names the bad field
+            fault = check_item(item.command, item.frame, (item.param1, item.param2, item.param3, item.param4),
+                               item.x, item.y, item.z, item.current, item.autocontinue)
+            if fault is not None:
+                return self.refuse(sysid, item.seq, item.mission_type, fault)
         up.items.append(item)
         up.retries = 0
         if len(up.items) == up.count:
@@ -171,6 +182,16 @@ class MissionServer:
             return self._finish(up, t)
         self._request(up, t)
         return None
+
+    def refuse(self, sysid: int, seq: int, mission_type: int, fault: ItemFault) -> str | None:
+        """End the upload in progress from ``sysid`` at item ``seq`` with the fault's MISSION_ACK; the stored
+        list stays as it was. Returns the reason for a STATUSTEXT (None when there was no such upload)."""
+        up = self.upload
+        if up is None or up.sysid != sysid or up.mission_type != mission_type or seq != len(up.items):
+            return None
+        self.upload = None
+        self._ack(up.sysid, up.compid, fault.result, up.mission_type)
+        return f"mission item {seq} refused: {fault.message}; previous plan kept"
 
     def _finish(self, up: _Upload, t: float) -> str | None:
         items = tuple(up.items)

@@ -13,18 +13,22 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from link.plan_items import (  # the MAV_CMD numbers of the items a plan may hold
+    LEASE_BOUNDARY,
+    LOCAL_FRAMES,
+    MISSION_FRAME,
+    NAV_LOITER_TIME,
+    NAV_RETURN_TO_LAUNCH,
+    NAV_RETURN_TO_LINK,
+    NAV_WAYPOINT,
+    check_fields,
+)
 from vehicle.lease import ExpireReason, ServiceBlock
 from vehicle.navigation import FollowerConfig, Path, follow
 from vehicle.params import Params
 from vehicle.returning import LINK_TAG_LAG_S, Route, Target, plan_route, truncate
 from vehicle.trail import Trail
 
-# MAV_CMD numbers of the items a plan may hold
-NAV_WAYPOINT = 16
-NAV_LOITER_TIME = 19
-NAV_RETURN_TO_LAUNCH = 20
-NAV_RETURN_TO_LINK = 44002
-LEASE_BOUNDARY = 44003
 SUPPORTED = (NAV_WAYPOINT, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_RETURN_TO_LINK)
 
 
@@ -45,7 +49,8 @@ class PlanItem:
 def blocks_from_items(items: list[PlanItem] | tuple[PlanItem, ...], params: Params) -> tuple[ServiceBlock, ...]:
     """Split a mission at LEASE_BOUNDARY items into service blocks (one execution lease each).
 
-    Raises ValueError naming the first unsupported item, so the mission protocol can refuse the upload whole.
+    Raises ValueError naming the first unsupported item or field out of range (``link.plan_items``), so the
+    mission protocol can refuse the upload whole, and no item reaches the service that it cannot run.
     """
     blocks: list[ServiceBlock] = []
     current: list[PlanItem] = []
@@ -57,6 +62,10 @@ def blocks_from_items(items: list[PlanItem] | tuple[PlanItem, ...], params: Para
             continue
         if it.command not in SUPPORTED:
             raise ValueError(f"item {k}: command {it.command} is not supported in a return plan")
+        frame = LOCAL_FRAMES[0] if it.command == NAV_WAYPOINT else MISSION_FRAME  # x/y are local metres here
+        fault = check_fields(it.command, frame, (it.param1, it.param2, it.param3, it.param4, it.x, it.y, 0.0))
+        if fault is not None:
+            raise ValueError(f"item {k}: {fault.message}")
         current.append(replace(it, seq=k))
     if current:
         blocks.append(_block(current, params))
