@@ -81,17 +81,20 @@ class Delivery:
             u = self.newest + d
             return Delivery(_trim((*self.arrivals, (t, u)), t - horizon), u, t, 0)
         u = self.newest - (SEQ_SPACE - d)  # behind the newest: a late packet or a duplicate of one
-        if u <= self.arrivals[0][1] or any(a == u for _, a in self.arrivals):
-            return replace(self, last_t=t)  # a duplicate, or too late to tell
+        first_t, first_u = self.arrivals[0]
+        if any(a == u for _, a in self.arrivals) or (u < first_u and first_t <= t - horizon):
+            return replace(self, last_t=t)  # a duplicate, or older than the window remembers
         arrivals = tuple(sorted((*self.arrivals, (t, u)), key=lambda a: a[1]))
         return replace(self, arrivals=_trim(arrivals, t - horizon), last_t=t)
 
     def interval(self) -> float | None:
         """The sender's mean time between packets over the window (None until it can be told)."""
         a = self.arrivals
-        if len(a) < 2 or a[-1][1] <= a[0][1]:
+        if len(a) < 2:
             return None
-        return max(0.0, a[-1][0] - a[0][0]) / (a[-1][1] - a[0][1])
+        span_t = max(x for x, _ in a) - min(x for x, _ in a)
+        span_u = a[-1][1] - a[0][1]
+        return span_t / span_u if span_t > 0 and span_u > 0 else None
 
     def covers(self, t: float, window: float) -> bool:
         """Whether the window reaches ``window`` seconds back from ``t`` (a ratio over it is a full measure)."""
