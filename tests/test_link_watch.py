@@ -160,3 +160,19 @@ def test_lease_book_consumes_the_trigger():
     assert reasons == [ExpireReason.COMMS_LOST, ExpireReason.LINK_REGAINED]
     assert events[1][0] - events[0][0] >= 1.0 - 1e-9
     assert book.current.holder is Holder.OPERATOR and not book.current.claimed
+
+
+def test_two_lucky_packets_are_not_a_regained_link():
+    """After a loss, two heartbeats a second apart do not make LINK_REGAINED; a stream for LNK_REGAIN_S does."""
+    st = Station(LinkWatch(cfg()))
+    st.run(0.0, 5.0)
+    st.run(5.0, 10.0, arrives=lambda k, t: False)
+    assert [trig for _, trig in st.triggers] == [Trigger.LOST]
+    st.send(10.0)
+    st.step(10.0)
+    st.send(11.0)
+    for n in range(550, 600):
+        st.step(n * 0.02)
+    assert [trig for _, trig in st.triggers] == [Trigger.LOST]
+    st.run(12.0, 14.0)
+    assert [trig for _, trig in st.triggers] == [Trigger.LOST, Trigger.REGAINED]

@@ -517,7 +517,8 @@ class LeaseBook:
         c = self.config
         return {
             "config": {"link_timeout": c.link_timeout, "regain_s": c.regain_s, "contact_gap": c.contact_gap,
-                       "min_quality": c.min_quality, "rearm": c.rearm, "autogrant": c.autogrant, "stale_take": c.stale_take},
+                       "min_quality": c.min_quality, "rearm": c.rearm, "autogrant": c.autogrant,
+                       "stale_take": c.stale_take},
             "epoch": self.epoch, "owner": self.owner, "owner_compid": self.owner_compid,
             "leases": [lease(x) for x in self.leases], "next_index": self.next_index, "chains": self.chains,
             "plan": [{"payload": b.payload, "halt_on_regain": b.halt_on_regain} for b in self.plan],
@@ -552,7 +553,8 @@ class LeaseBook:
 
 def _link_snapshot(link: LinkWatch) -> dict[str, Any]:
     d = link.delivery
-    return {"last_heard": link.last_heard, "contact_since": link.contact_since, "lost": link.lost,
+    return {"last_heard": link.last_heard, "contact_since": link.contact_since,
+            "contact_packets": link.contact_packets, "lost": link.lost,
             "last_good": link.last_good,
             "delivery": {"arrivals": [list(a) for a in d.arrivals], "newest": d.newest, "last_t": d.last_t,
                          "repeats": d.repeats}}
@@ -562,8 +564,8 @@ def _link_restore(config: WatchConfig, snap: dict[str, Any]) -> LinkWatch:
     d = snap.get("delivery") or {}
     delivery = Delivery(tuple((float(a), int(u)) for a, u in d.get("arrivals", ())), d.get("newest"),
                         d.get("last_t"), d.get("repeats", 0))
-    return LinkWatch(config, snap["last_heard"], snap["contact_since"], snap["lost"], snap.get("last_good"),
-                     delivery)
+    return LinkWatch(config, snap["last_heard"], snap["contact_since"], snap.get("contact_packets", 0), snap["lost"],
+                     snap.get("last_good"), delivery)
 
 
 def _sub_is_live(sub: tuple[int, ...], newest: tuple[int, ...]) -> bool:

@@ -33,6 +33,8 @@ GOOD_QUALITY = 0.8  # delivery at or above this is a good link (crumb tags, cont
 SEQ_SPACE = 256  # MAVLink's uint8 sequence number
 MAX_WINDOW_PACKETS = 1024  # memory bound of the receiver window (a fast sender shortens the window it covers)
 STUCK_REPEATS = 3  # arrivals of one sequence number, none advancing, after which a sender is unmeasurable
+REGAIN_PACKETS = 3  # good packets a regained contact needs at least: two lucky heartbeats a second apart are not
+# a link (on a working link a ground station's stream brings ten times as many within LNK_REGAIN_S)
 
 
 class Trigger(enum.Enum):
@@ -133,6 +135,7 @@ class LinkWatch:
     config: WatchConfig = field(default_factory=WatchConfig)
     last_heard: float | None = None
     contact_since: float | None = None  # start of the current run of good, unbroken contact (after any loss)
+    contact_packets: int = 0  # packets heard in that run
     lost: bool = False  # LOST fired and REGAINED has not yet
     last_good: float | None = None  # the last packet heard with a good delivery (settles the crumbs' link tags)
     delivery: Delivery = field(default_factory=Delivery)
@@ -147,10 +150,11 @@ class LinkWatch:
             delivery = delivery.heard(seq, t, max(cfg.window, cfg.timeout), cfg.timeout)
         good = seq is None or _good(delivery.ratio(t, cfg.window))
         if not good:
-            return replace(self, last_heard=t, contact_since=None, delivery=delivery)
+            return replace(self, last_heard=t, contact_since=None, contact_packets=0, delivery=delivery)
         unbroken = (self.contact_since is not None and self.last_heard is not None
                     and t - self.last_heard <= cfg.contact_gap + EPS)
         return replace(self, last_heard=t, contact_since=self.contact_since if unbroken else t, last_good=t,
+                       contact_packets=self.contact_packets + 1 if unbroken else 1,
                        delivery=delivery)
 
     def step(self, t: float) -> tuple[LinkWatch, Trigger]:
@@ -162,10 +166,11 @@ class LinkWatch:
         if not self.lost:
             if age >= cfg.timeout - EPS or self.poor(t):
                 # contact from before the loss never counts toward the regain
-                return replace(self, lost=True, contact_since=None), Trigger.LOST
+                return replace(self, lost=True, contact_since=None, contact_packets=0), Trigger.LOST
             return self, Trigger.NONE
         if (self.contact_since is not None and age <= cfg.contact_gap + EPS
-                and t - self.contact_since >= cfg.regain_s - EPS):
+                and t - self.contact_since >= cfg.regain_s - EPS
+                and (self.delivery.newest is None or self.contact_packets >= REGAIN_PACKETS)):
             return replace(self, lost=False), Trigger.REGAINED
         return self, Trigger.NONE
 

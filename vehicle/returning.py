@@ -14,6 +14,7 @@ import numpy as np
 
 from vehicle.trail import Trail
 
+SPEED_RANGE = (0.3, 2.0)  # m/s: stretch speeds worth copying (a crawl is a pause; beyond the teleop limit, a glitch)
 LINK_TAG_LAG_S = 1.0  # the link-quality estimate behind a crumb's tag averages over about this long
 
 
@@ -124,6 +125,9 @@ def outbound_speeds(trail: Trail, idx: np.ndarray) -> np.ndarray:
         with np.errstate(divide="ignore", invalid="ignore"):
             seg[1:] = np.where(dt > 1e-6, dist / np.where(dt > 1e-6, dt, 1.0), np.nan)
     v = np.array([seg[i] if 1 <= i < len(seg) else np.nan for i in idx])
+    # a stretch slower than a crawl held a pause (or joins crumbs of different drives), one faster than the
+    # robot can go is an estimation glitch: neither is a pace to copy, the neighbours' is
+    v[(v < SPEED_RANGE[0]) | (v > SPEED_RANGE[1])] = np.nan
     for k in range(len(v) - 2, -1, -1):  # the start and the trail's first point take their neighbour's stretch
         if np.isnan(v[k]):
             v[k] = v[k + 1]

@@ -16,7 +16,7 @@ import numpy as np
 from vehicle.lease import ExpireReason, ServiceBlock
 from vehicle.navigation import FollowerConfig, Path, follow
 from vehicle.params import Params
-from vehicle.returning import LINK_TAG_LAG_S, Route, Target, continue_from, plan_route, truncate
+from vehicle.returning import LINK_TAG_LAG_S, SPEED_RANGE, Route, Target, continue_from, plan_route, truncate
 from vehicle.trail import Trail
 
 # MAV_CMD numbers of the items a plan may hold
@@ -95,8 +95,7 @@ class ServiceState:
     onward: bool = False  # went on past a dead-zone target (DESIGN §6): the next arrival ends the block
 
 
-RETURN_SPEED_MIN = 0.3  # m/s: a stretch driven slower than this outbound was a pause, not a pace
-RETURN_SPEED_MAX = 2.0  # m/s: the robot's teleop limit (vehicle.app.MAX_TELEOP_SPEED); faster is a bad estimate
+RETURN_SPEED_MIN, RETURN_SPEED_MAX = SPEED_RANGE  # m/s: within the robot's limits (MAX_TELEOP_SPEED)
 
 
 @dataclass(frozen=True)
