@@ -107,6 +107,16 @@ def test_reordering_and_duplicates_are_not_loss():
         assert w.good(k * 0.1 + 0.01) and w.contact_since == 0.0, k  # contact never broken
 
 
+def test_duplicates_do_not_hide_loss():
+    """Half the packets lost, each survivor duplicated and the copy arriving late: delivery is a half, not 1."""
+    d = Delivery()
+    sent = [k for k in range(1, 200, 2)]
+    arrivals = [sent[0]] + [x for a, b in zip(sent[1:], sent, strict=False) for x in (a, b)]
+    for n, s in enumerate(arrivals):
+        d = d.heard(s % 256, n * 0.1, 3.0, 3.0)
+    assert abs(d.ratio(len(arrivals) * 0.1, 3.0) - 0.5) < 0.1
+
+
 def test_loss_is_measured_over_the_window():
     d = Delivery()
     for k in range(100):
