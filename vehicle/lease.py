@@ -564,8 +564,9 @@ def _link_restore(config: WatchConfig, snap: dict[str, Any]) -> LinkWatch:
     d = snap.get("delivery") or {}
     delivery = Delivery(tuple((float(a), int(u)) for a, u in d.get("arrivals", ())), d.get("newest"),
                         d.get("last_t"), d.get("repeats", 0))
-    return LinkWatch(config, snap["last_heard"], snap["contact_since"], snap.get("contact_packets", 0), snap["lost"],
-                     snap.get("last_good"), delivery)
+    return LinkWatch(config=config, last_heard=snap["last_heard"], contact_since=snap["contact_since"],
+                     contact_packets=snap.get("contact_packets", 0), lost=snap["lost"],
+                     last_good=snap.get("last_good"), delivery=delivery)
 
 
 def _sub_is_live(sub: tuple[int, ...], newest: tuple[int, ...]) -> bool:
