@@ -555,6 +555,7 @@ def _link_snapshot(link: LinkWatch) -> dict[str, Any]:
     d = link.delivery
     return {"last_heard": link.last_heard, "contact_since": link.contact_since,
             "contact_packets": link.contact_packets, "lost": link.lost,
+            "quality_heard": link.quality_heard, "low": link.low,
             "last_good": link.last_good,
             "delivery": {"arrivals": [list(a) for a in d.arrivals], "newest": d.newest, "last_t": d.last_t,
                          "repeats": d.repeats}}
@@ -566,7 +567,8 @@ def _link_restore(config: WatchConfig, snap: dict[str, Any]) -> LinkWatch:
                         d.get("last_t"), d.get("repeats", 0))
     return LinkWatch(config=config, last_heard=snap["last_heard"], contact_since=snap["contact_since"],
                      contact_packets=snap.get("contact_packets", 0), lost=snap["lost"],
-                     last_good=snap.get("last_good"), delivery=delivery)
+                     last_good=snap.get("last_good"), delivery=delivery, quality_heard=snap.get("quality_heard"),
+                     low=snap.get("low", False))
 
 
 def _sub_is_live(sub: tuple[int, ...], newest: tuple[int, ...]) -> bool:

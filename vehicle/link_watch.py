@@ -139,23 +139,28 @@ class LinkWatch:
     lost: bool = False  # LOST fired and REGAINED has not yet
     last_good: float | None = None  # the last packet heard with a good delivery (settles the crumbs' link tags)
     delivery: Delivery = field(default_factory=Delivery)
+    # measured when the last packet came (between packets only silence changes, and the timeout measures that):
+    # the 50 Hz tick reads two values instead of walking the window
+    quality_heard: float | None = None  # delivery over ``window``
+    low: bool = False  # delivery over a full LNK_TIMEOUT below LNK_MIN_Q
 
     # ----- inputs ------------------------------------------------------------------------------------------
     def heard(self, t: float, seq: int | None = None) -> LinkWatch:
         """A packet from the owner at ``t``. Without ``seq`` (a transport with no sequence numbers) the packet is
         taken as good; with it, only a measured good delivery keeps contact unbroken."""
         cfg = self.config
-        delivery = self.delivery
+        delivery, q, low = self.delivery, self.quality_heard, self.low
         if seq is not None:
             delivery = delivery.heard(seq, t, max(cfg.window, cfg.timeout), cfg.timeout)
-        good = seq is None or _good(delivery.ratio(t, cfg.window))
-        if not good:
-            return replace(self, last_heard=t, contact_since=None, contact_packets=0, delivery=delivery)
+            q, low = delivery.ratio(t, cfg.window), _low(delivery, t, cfg)
+        if not (seq is None or _good(q)):
+            return replace(self, last_heard=t, contact_since=None, contact_packets=0, delivery=delivery,
+                           quality_heard=q, low=low)
         unbroken = (self.contact_since is not None and self.last_heard is not None
                     and t - self.last_heard <= cfg.contact_gap + EPS)
         return replace(self, last_heard=t, contact_since=self.contact_since if unbroken else t, last_good=t,
                        contact_packets=self.contact_packets + 1 if unbroken else 1,
-                       delivery=delivery)
+                       delivery=delivery, quality_heard=q, low=low)
 
     def step(self, t: float) -> tuple[LinkWatch, Trigger]:
         """Evaluate the deadlines at ``t``: LOST, REGAINED or nothing."""
@@ -164,7 +169,7 @@ class LinkWatch:
         if age is None:
             return self, Trigger.NONE
         if not self.lost:
-            if age >= cfg.timeout - EPS or self.poor(t):
+            if age >= cfg.timeout - EPS or self.low:
                 # contact from before the loss never counts toward the regain
                 return replace(self, lost=True, contact_since=None, contact_packets=0), Trigger.LOST
             return self, Trigger.NONE
@@ -175,7 +180,8 @@ class LinkWatch:
         return self, Trigger.NONE
 
     def with_config(self, config: WatchConfig) -> LinkWatch:
-        return replace(self, config=config)
+        low = self.low if self.last_heard is None else _low(self.delivery, self.last_heard, config)
+        return replace(self, config=config, low=low)
 
     # ----- queries -----------------------------------------------------------------------------------------
     def age(self, t: float) -> float | None:
@@ -193,16 +199,16 @@ class LinkWatch:
             return False
         if self.delivery.newest is None:
             return True
-        return _good(self.quality(t))
+        return _good(self.quality_heard)
 
-    def poor(self, t: float) -> bool:
-        """LNK_MIN_Q: the owner's delivery over the last LNK_TIMEOUT (a full window of it) is below the minimum.
-        Lucky packets reset the silence timer; they do not lift the delivery over a whole timeout."""
-        cfg = self.config
-        if cfg.min_quality <= 0 or not self.delivery.covers(t, cfg.timeout):
-            return False
-        q = self.delivery.ratio(t, cfg.timeout)
-        return q is not None and q < cfg.min_quality - EPS
+
+def _low(delivery: Delivery, t: float, cfg: WatchConfig) -> bool:
+    """LNK_MIN_Q: the owner's delivery over the last LNK_TIMEOUT (a full window of it) is below the minimum.
+    Lucky packets reset the silence timer; they do not lift the delivery over a whole timeout."""
+    if cfg.min_quality <= 0 or not delivery.covers(t, cfg.timeout):
+        return False
+    q = delivery.ratio(t, cfg.timeout)
+    return q is not None and q < cfg.min_quality - EPS
 
 
 def _good(q: float | None) -> bool:
