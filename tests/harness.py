@@ -29,6 +29,8 @@ class Pair:
         self.t = 0.0
         self.raw: list[bytes] = []  # extra bytes to inject into the vehicle next tick
         self.heard: list[bytes] = []  # every frame the vehicle sent
+        # whether a station's next frame to the vehicle is lost (a radio outage): (sysid, t) -> lost
+        self.lose = lambda sysid, t: False
 
     @property
     def gs(self) -> GroundStation:
@@ -38,8 +40,10 @@ class Pair:
         for _ in range(max(1, int(round(seconds / DT)))):
             self.t = round(self.t + DT, 9)
             for gs in [*self.stations.values(), *self.intruders]:
+                sysid = gs.sysid
                 for frame in gs.tick(self.t):
-                    self.endpoint.receive(frame, self.t)
+                    if not self.lose(sysid, self.t):
+                        self.endpoint.receive(frame, self.t)
             for data in self.raw:
                 self.endpoint.receive(data, self.t)
             self.raw.clear()

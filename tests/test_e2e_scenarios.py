@@ -48,7 +48,15 @@ def test_scenario_meets_its_criteria(name, vehicle):
 def test_return_begins_within_one_tick_of_the_timeout(name, vehicle):
     r, m = run(name, vehicle)
     assert m["reaction_latency_s"] is not None
-    assert -1e-9 <= m["reaction_latency_s"] <= DT + 1e-9
+    assert m["reaction_latency_s"] <= DT + 1e-9
+    if m["reaction_latency_s"] < -1e-9:
+        # before the silence timeout only on LNK_MIN_Q (DESIGN §3.5): over the LNK_TIMEOUT before the loss the
+        # radio's delivery probability was about that low (0.1 of slack: the vehicle counts some 30 packets, a
+        # random sample of it)
+        params = r.vehicle.params
+        k = int(round(r.losses[0][0] / DT)) - 1
+        n = int(round(params["LNK_TIMEOUT"] / DT))
+        assert float(np.mean(r.trace.link[k - n:k + 1])) < params["LNK_MIN_Q"] + 0.1
 
 
 @pytest.mark.parametrize("vehicle", ["rover", "legged"])
@@ -74,9 +82,11 @@ def test_handover_refuses_the_first_station_after_takeover():
     assert "ROOT_REPLACED" in reasons
     assert r.vehicle.book.owner == r.scenario.station("bravo").sysid
     assert m["commands_rejected"] > 0 and m["stale_commands_executed"] == 0
+    bravo = r.stations["bravo"].gs
+    assert any("return in progress" in text for t, text in bravo.texts if t < 41)  # the first try, mid-return
     alpha = r.stations["alpha"].gs
     assert any("refused" in text for _, text in alpha.texts)  # alpha was told, not silently ignored
-    revived = r.scenario.events[2].t
+    revived = next(e.t for e in r.scenario.events if e.action == "revive_gcs")
     k = int(round(revived / DT))
     moved = np.hypot(*np.diff(np.array(r.trace.true[k:]), axis=0).T).sum()
     assert moved < 0.05  # alpha's stream after it came back never drove the robot

@@ -11,6 +11,7 @@ from tests.harness import Pair
 from vehicle.app import State
 from vehicle.mavlink import mav
 from vehicle.modes import decode_mode
+from vehicle.params import SPECS
 
 
 def acquired(pair: Pair) -> Pair:
@@ -149,7 +150,7 @@ def test_params_real32_range_refusal_and_sixteen_char_names():
     gs = pair.gs
     gs.param_request_all()
     pair.step(0.1)
-    assert len(gs.vehicle.params) == 16 and gs.vehicle.param_count == 16
+    assert len(gs.vehicle.params) == len(SPECS) and gs.vehicle.param_count == len(SPECS)
     gs.param_set("LNK_TIMEOUT", 999.0)
     pair.step(0.1)
     assert gs.vehicle.params["LNK_TIMEOUT"] == 3.0 and pair.vehicle.params["LNK_TIMEOUT"] == 3.0

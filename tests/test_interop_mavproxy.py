@@ -12,6 +12,7 @@ import pytest
 
 from tests.interop import ServedVehicle, wait_until
 from vehicle.app import State
+from vehicle.params import SPECS
 
 PLAN = ("QGC WPL 110\n"
         "0\t1\t2\t44002\t30\t0\t-1\t-1\t0\t0\t0\t1\n"
@@ -38,7 +39,8 @@ def mavproxy(tmp_path):
         proc.stdin.flush()
 
     try:
-        wait_until(lambda: "Received 16 parameters" in log.read_text(), 30, "MAVProxy to fetch the parameters")
+        wait_until(lambda: f"Received {len(SPECS)} parameters" in log.read_text(), 30,
+                   "MAVProxy to fetch the parameters")
         yield served, say, log
     finally:
         proc.kill()

@@ -22,6 +22,7 @@ from vehicle.lease import (
 
 STATIONS = (255, 245, 200)
 TIMEOUT, REGAIN, GAP = 3.0, 1.0, 1.5
+EPS = 1e-6  # deadlines are met within this (float sums of steps must not fire a tick late)
 
 
 class LeaseMachine(RuleBasedStateMachine):
@@ -173,7 +174,7 @@ class LeaseMachine(RuleBasedStateMachine):
         self.t += dt
         self._tick()
         if station == self.book.owner:
-            continuous = self.m_last is not None and self.t - self.m_last <= GAP
+            continuous = self.m_since is not None and self.m_last is not None and self.t - self.m_last <= GAP + EPS
             self.m_since = self.m_since if continuous else self.t
             self.m_last = self.t
         self.book = self.book.heard(station, self.t)
@@ -187,12 +188,14 @@ class LeaseMachine(RuleBasedStateMachine):
         book = self.book
         # independent oracle for the link triggers
         expect_lost_now = False
-        if book.owner is not None and not self.m_lost and self.m_last is not None and self.t - self.m_last >= TIMEOUT:
+        if (book.owner is not None and not self.m_lost and self.m_last is not None
+                and self.t - self.m_last >= TIMEOUT - EPS):
             self.m_lost = True
+            self.m_since = None  # contact from before the loss never counts as regained contact
             self.comms_lost_in_episode = 0
             expect_lost_now = book.current.holder is Holder.OPERATOR
-        elif (book.owner is not None and self.m_lost and self.m_last is not None and self.t - self.m_last <= GAP
-              and self.m_since is not None and self.t - self.m_since >= REGAIN):
+        elif (book.owner is not None and self.m_lost and self.m_last is not None and self.t - self.m_last <= GAP + EPS
+              and self.m_since is not None and self.t - self.m_since >= REGAIN - EPS):
             self.m_lost = False
         out = book.tick(self.t)
         reasons = [e.reason for e in out.events]

@@ -26,17 +26,22 @@ from vehicle.service import (
 )
 
 
-def run_block(rig, block, params, link_lost=True, limit=600.0):
+def run_block(rig, block, params, link_lost=True, limit=600.0, watch=None):
+    """Drive one block to its end; ``link_lost`` may be a function of the rig (the link coming back), and
+    ``watch(rig, result)`` sees every step."""
+    lost = link_lost if callable(link_lost) else (lambda _rig: link_lost)
     p = rig.estimator.pose
-    res = start(block, p.x, p.y, rig.t, rig.trail, params, link_lost, 1.2)
+    res = start(block, p.x, p.y, rig.t, rig.trail, params, lost(rig), 1.2)
     max_disp = 0.0
     end = rig.t + limit
     while res.finished is None and rig.t < end:
         p = rig.estimator.pose
-        res = step(res.state, p.x, p.y, p.yaw, rig.t, rig.trail, params, link_lost, 1.2)
+        res = step(res.state, p.x, p.y, p.yaw, rig.t, rig.trail, params, lost(rig), 1.2)
         rig.step(res.speed, res.yaw_rate)
         q = rig.estimator.pose
         max_disp = max(max_disp, displacement(res.state, q.x, q.y))
+        if watch is not None:
+            watch(rig, res)
     return res, max_disp
 
 
@@ -64,15 +69,41 @@ def test_plan_splits_at_boundaries_and_rejects_unknown_items():
         blocks_from_items([PlanItem(22)], params)
 
 
-def test_return_to_link_reaches_the_last_good_crumb_in_the_tunnel():
+def _dist(rig, target) -> float:
+    p = rig.estimator.pose
+    return math.hypot(p.x - target[0], p.y - target[1])
+
+
+def test_return_to_link_passes_the_last_good_crumb_and_goes_on_while_the_link_stays_down():
+    """DESIGN §6: a RETURN_TO_LINK block that reaches its target without the link being back keeps going back
+    along the trail, within its displacement budget (here the link never comes back)."""
     s, rig = outbound()
     good = rig.trail.link_good()
     target = rig.trail.points()[int(np.flatnonzero(good)[-1])]
-    res, _ = run_block(rig, default_plan(Params())[0], Params())
+    closest = [math.inf]
+    res, max_disp = run_block(rig, default_plan(Params())[0], Params(),
+                              watch=lambda r, _res: closest.__setitem__(0, min(closest[0], _dist(r, target))))
+    assert closest[0] <= Params()["RTL_ARRIVE_R"] + 0.5  # it got to the target ...
     assert res.finished is ExpireReason.COMPLETED
-    p = rig.estimator.pose
-    assert math.hypot(p.x - target[0], p.y - target[1]) <= Params()["RTL_ARRIVE_R"] + 0.5
+    assert res.state.onward  # ... and went on
+    budget = Params()["RTL_MAX_DISP"]
+    assert budget - 1.5 <= max_disp <= budget + 0.3  # to the edge of its displacement budget
     assert rig.world.collisions == 0
+
+
+def test_going_on_past_a_dead_zone_target_ends_when_the_link_is_back():
+    s, rig = outbound()
+    good = rig.trail.link_good()
+    target = rig.trail.points()[int(np.flatnonzero(good)[-1])]
+    params = Params()
+    block = blocks_from_items([PlanItem(NAV_RETURN_TO_LINK, param4=1)], params)[0]  # continue on regain
+
+    def lost(r):  # the link is back 5 m past the target (closer to the portal)
+        return r.estimator.pose.x > target[0] - 5.0
+
+    res, _ = run_block(rig, block, params, link_lost=lost)
+    assert res.finished is ExpireReason.COMPLETED and res.state.onward
+    assert target[0] - 7.0 <= rig.estimator.pose.x <= target[0] - 4.0
 
 
 def test_return_never_exceeds_max_displacement():

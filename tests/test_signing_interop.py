@@ -17,6 +17,7 @@ from tests.interop import ServedVehicle, wait_until
 from tests.test_interop_mavproxy import _mavproxy
 from vehicle.app import State
 from vehicle.keystore import write_key
+from vehicle.params import SPECS
 
 PASSPHRASE = "adit-7-returnlink"
 
@@ -46,7 +47,8 @@ def test_mavproxy_with_the_signing_module_flies_a_keyed_vehicle(keyed, tmp_path)
 
     try:
         # unsigned, it can still download the parameters ...
-        wait_until(lambda: "Received 16 parameters" in log.read_text(), 30, "MAVProxy to fetch the parameters")
+        wait_until(lambda: f"Received {len(SPECS)} parameters" in log.read_text(), 30,
+                   "MAVProxy to fetch the parameters")
         say("param set LNK_TIMEOUT 5")  # ... but not set one
         wait_until(lambda: "unsigned PARAM_SET from 255 refused" in log.read_text(), 10, "the refusal")
         assert served.vehicle.params["LNK_TIMEOUT"] == 3.0
@@ -78,7 +80,7 @@ def test_mavsdk_can_watch_a_keyed_vehicle_but_not_act(keyed):
         assert abs(tel.position().latitude_deg - 47.3977) < 0.001
         par = Param(system)
         assert par.get_param_float("LNK_TIMEOUT") == pytest.approx(3.0)
-        assert len(par.get_all_params().float_params) == 16
+        assert len(par.get_all_params().float_params) == len(SPECS)
         with pytest.raises(Exception):  # noqa: B017 - MAVSDK's own ParamError: no answer to an unsigned set
             par.set_param_float("LNK_TIMEOUT", 4.5)
         with pytest.raises(Exception):  # noqa: B017 - MAVSDK's own ActionError: no answer to an unsigned command

@@ -31,7 +31,6 @@ from vehicle.lease import (
     epoch_before,
 )
 from vehicle.params import Params
-from vehicle.returning import LINK_TAG_LAG_S
 from vehicle.service import (
     NAV_LOITER_TIME,
     NAV_WAYPOINT,
@@ -49,35 +48,6 @@ DT = 0.02  # the control tick: 50 Hz
 SETPOINT_TTL = 0.5  # s: a teleop setpoint not refreshed this long is dropped (dead-man)
 MAX_TELEOP_SPEED = 2.0  # m/s at full stick
 MAX_TELEOP_YAW_RATE = 1.2  # rad/s at full stick
-GOOD_LINK_QUALITY = 0.8  # share of the owner's packets arriving (from MAVLink sequence gaps) for a link-good crumb
-QUALITY_TAU = LINK_TAG_LAG_S  # s: time constant of the link-quality estimate
-
-
-@dataclass
-class LinkQuality:
-    """Share of one sender's packets that arrive, from the gaps in its MAVLink sequence numbers.
-
-    "Heard within LNK_GOOD_S" alone tags the fringe of coverage as good, where one lucky packet in five gets
-    through; a return target there does not bring the link back. Sequence gaps are what any radio link shows.
-    """
-
-    received: float = 0.0
-    lost: float = 0.0
-    last_seq: int | None = None
-    at: float = 0.0
-
-    def update(self, seq: int, t: float) -> None:
-        decay = math.exp(-max(0.0, t - self.at) / QUALITY_TAU)
-        self.received, self.lost, self.at = self.received * decay, self.lost * decay, t
-        gap = 0 if self.last_seq is None else (seq - self.last_seq - 1) % 256
-        if gap < 128:  # a larger jump is a reorder or a restart, not loss
-            self.lost += gap
-        self.received += 1
-        self.last_seq = seq
-
-    def value(self) -> float:
-        total = self.received + self.lost
-        return 1.0 if total <= 0 else self.received / total
 
 
 class State:
@@ -99,7 +69,8 @@ class Setpoint:
 
 def lease_config(params: Params) -> LeaseConfig:
     return LeaseConfig(link_timeout=params["LNK_TIMEOUT"], regain_s=params["LNK_REGAIN_S"],
-                       contact_gap=params["LNK_GOOD_S"], rearm=bool(params["RTL_REARM"]),
+                       contact_gap=params["LNK_GOOD_S"], min_quality=params["LNK_MIN_Q"],
+                       rearm=bool(params["RTL_REARM"]),
                        autogrant=bool(params["LEASE_AUTOGRANT"]), stale_take=bool(params["LEASE_STALE_TAKE"]))
 
 
@@ -134,8 +105,6 @@ class Vehicle:
         self.service_index: int | None = None
         self.outbound_speed = 0.0
         self.readings: Readings | None = None
-        self.quality: dict[int, LinkQuality] = {}
-        self.last_good_packet: float | None = None  # the owner's last packet heard with good link quality
         self._crumbs: deque[Crumb] = deque()  # recorded, waiting for their link tag to be final
         self.last_fix: tuple[float, float] | None = None  # the last fix used, for GPS_RAW_INT
         self.last_fix_t: float | None = None
@@ -185,14 +154,8 @@ class Vehicle:
         self._apply(self.book.admit(sender, compid, t, self.seed))
 
     def heard(self, sysid: int, t: float, seq: int | None = None) -> None:
-        good = True
-        if seq is not None:
-            q = self.quality.setdefault(sysid, LinkQuality())
-            q.update(seq, t)
-            good = q.value() >= GOOD_LINK_QUALITY
-        self.book = self.book.heard(sysid, t, good)
-        if good and sysid == self.book.owner:
-            self.last_good_packet = t
+        """A frame from ``sysid`` with MAVLink sequence number ``seq``: the owner's feed the link watch."""
+        self.book = self.book.heard(sysid, t, seq)
 
     def acquire(self, sender: int, compid: int, t: float, allow_takeover: bool) -> Check:
         why = self.book.take_refusal(sender, t)
@@ -344,12 +307,8 @@ class Vehicle:
         return State.NAVIGATING if command == NAV_WAYPOINT else State.RETURNING
 
     def link_good(self, t: float) -> bool:
-        owner = self.book.owner
-        age = self.book.link.age(t)
-        if owner is None or age is None or age > self.params["LNK_GOOD_S"]:
-            return False
-        q = self.quality.get(owner)
-        return q is None or q.value() >= GOOD_LINK_QUALITY
+        """The link tag of a crumb laid now (the link watch decides)."""
+        return self.book.owner is not None and self.book.link.good(t)
 
     def displacement(self) -> float:
         if self.service is None:
@@ -376,7 +335,9 @@ class Vehicle:
 
         self._apply(self.book.tick(t))
         cur = self.book.current
-        self._lay_crumbs(t, flush=cur is not None and cur.holder is Holder.RETURN_SERVICE)
+        # a block about to start plans from the whole trail; afterwards crumbs wait for their true tag again
+        starting = cur is not None and cur.holder is Holder.RETURN_SERVICE and self.service_index != cur.index
+        self._lay_crumbs(t, flush=starting)
         speed, yaw_rate = self._control(t, p.x, p.y, p.yaw)
         if not self.armed:
             speed, yaw_rate = 0.0, 0.0
@@ -389,10 +350,12 @@ class Vehicle:
 
         A crumb is link-good only if the owner was heard well there *and* heard well again afterwards: the last
         stretch before the link died was driven while the silence was still shorter than LNK_GOOD_S, and must
-        not become a return target. A return needs the whole trail, so it flushes them with what is known.
+        not become a return target. A block about to start needs the whole trail, so it flushes them with what is
+        known; crumbs laid while it runs wait for their true tag like any other (a return over a good link lays
+        good crumbs, and a later return must not take them for lost ones and drive away from the operator).
         """
         horizon = t if flush else t - self.params["LNK_GOOD_S"]
-        last = self.last_good_packet
+        last = self.book.link.last_good
         while self._crumbs and self._crumbs[0].t <= horizon:
             c = self._crumbs.popleft()
             good = c.link_good and last is not None and last >= c.t

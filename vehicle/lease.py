@@ -16,6 +16,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from vehicle.link_watch import EPS, Delivery, LinkWatch, Trigger, WatchConfig
+
 NO_INDEX = 0xFFFF  # wire value for "no lease" in LEASE_EVENT / LEASE_STATUS
 RETURN_IN_PROGRESS = "return in progress"  # why a takeover (or a stranger's command) is refused during a return
 
@@ -158,30 +160,16 @@ class LeaseConfig:
     link_timeout: float = 3.0  # LNK_TIMEOUT
     regain_s: float = 1.0  # LNK_REGAIN_S
     contact_gap: float = 1.5  # LNK_GOOD_S: longest gap between messages that still counts as continuous contact
+    min_quality: float = 0.25  # LNK_MIN_Q: owner's delivery below this for link_timeout is lost too (0 = silence only)
     rearm: bool = True  # RTL_REARM
     autogrant: bool = True  # LEASE_AUTOGRANT
     stale_take: bool = True  # LEASE_STALE_TAKE
 
-
-@dataclass(frozen=True)
-class OwnerLink:
-    """What the vehicle knows of its owner's link: enough for COMMS_LOST and LINK_REGAINED."""
-
-    last_heard: float | None = None
-    contact_since: float | None = None  # start of the current run of continuous contact
-    lost: bool = False  # silent for link_timeout and not yet regained
-
-    def heard(self, t: float, gap: float, good: bool = True) -> OwnerLink:
-        """A message from the owner. ``good`` False (most of its packets are being lost) keeps the lease alive
-        but breaks continuous contact: a trickle of lucky packets is not a regained link."""
-        if not good:
-            return replace(self, last_heard=t, contact_since=None)
-        continuous = (self.last_heard is not None and t - self.last_heard <= gap
-                      and self.contact_since is not None)
-        return replace(self, last_heard=t, contact_since=self.contact_since if continuous else t)
-
-    def age(self, t: float) -> float | None:
-        return None if self.last_heard is None else t - self.last_heard
+    @property
+    def watch(self) -> WatchConfig:
+        """The part of the configuration the owner's link watch works with."""
+        return WatchConfig(timeout=self.link_timeout, regain_s=self.regain_s, contact_gap=self.contact_gap,
+                           min_quality=self.min_quality)
 
 
 @dataclass(frozen=True)
@@ -243,7 +231,7 @@ class LeaseBook:
     plan: tuple[ServiceBlock, ...] = (ServiceBlock(),)
     claims: tuple[tuple[int, LeaseId], ...] = ()  # (sysid, last lease it claimed)
     queue: tuple[QueuedCommand, ...] = ()
-    link: OwnerLink = field(default_factory=OwnerLink)
+    link: LinkWatch = field(default_factory=LinkWatch)  # the owner's link (kept in step with ``config``)
     last_reason: ExpireReason = ExpireReason.NONE
     takeover_allowed: bool = False
     last_epoch: int | None = None
@@ -279,7 +267,7 @@ class LeaseBook:
 
     def owner_stale(self, t: float) -> bool:
         age = self.link.age(t)
-        return age is None or age >= self.config.link_timeout
+        return age is None or age >= self.config.link_timeout - EPS
 
     # ----- enforcement (pure reads, the hot path) ----------------------------------------------------------
     def check(self, sender: int, claim: LeaseId | None = None) -> Check:
@@ -325,7 +313,7 @@ class LeaseBook:
         book = replace(
             self, epoch=epoch, owner=sysid, owner_compid=compid, next_index=1, chains=0,
             leases=(ExecutionLease(0, Holder.OPERATOR, LeaseState.CURRENT, started_at=t),),
-            claims=((sysid, LeaseId(epoch, (0,))),), queue=(), link=OwnerLink().heard(t, self.config.contact_gap),
+            claims=((sysid, LeaseId(epoch, (0,))),), queue=(), link=LinkWatch(self.config.watch).heard(t),
             takeover_allowed=allow_takeover, last_epoch=epoch,
             last_reason=ExpireReason.ROOT_REPLACED if had_owner else self.last_reason,
         )
@@ -340,7 +328,8 @@ class LeaseBook:
             return Outcome(self)
         old = self.current.index if self.current else None
         book = replace(self, epoch=None, owner=None, owner_compid=0, leases=(), claims=(), queue=(),
-                       link=OwnerLink(), last_reason=ExpireReason.RELEASED, takeover_allowed=False)
+                       link=LinkWatch(self.config.watch), last_reason=ExpireReason.RELEASED,
+                       takeover_allowed=False)
         event = LeaseEvent(t, self.epoch or 0, old, None, ExpireReason.RELEASED, Holder.NONE)
         return Outcome(book, (event,), dropped=self.queue)
 
@@ -379,30 +368,30 @@ class LeaseBook:
         return Outcome(self)
 
     # ----- owner link --------------------------------------------------------------------------------------
-    def heard(self, sysid: int, t: float, good: bool = True) -> LeaseBook:
-        """Any message from the owner keeps the lease alive; triggers are evaluated by ``tick``."""
+    def heard(self, sysid: int, t: float, seq: int | None = None) -> LeaseBook:
+        """A message from the owner (MAVLink sequence number ``seq``) keeps the lease alive; the link watch
+        measures its delivery, and ``tick`` evaluates the triggers."""
         if sysid != self.owner:
             return self
-        return replace(self, link=self.link.heard(t, self.config.contact_gap, good))
+        return replace(self, link=self.link.heard(t, seq))
 
     def tick(self, t: float) -> Outcome:
-        """Evaluate the time-driven triggers: COMMS_LOST and LINK_REGAINED (DESIGN §3.5)."""
+        """Consume the link watch's trigger: COMMS_LOST of an operator lease, LINK_REGAINED of a service block
+        (DESIGN §3.5). The watch alone decides whether the link was lost or regained."""
         if self.owner is None:
             return Outcome(self)
-        cfg, link, cur = self.config, self.link, self.leases[0]
-        age = link.age(t)
-        if not link.lost and age is not None and age >= cfg.link_timeout:
-            book = replace(self, link=replace(link, lost=True))
+        link, trigger = self.link.step(t)
+        if trigger is Trigger.NONE:
+            return Outcome(self) if link is self.link else Outcome(replace(self, link=link))
+        book = replace(self, link=link)
+        cur = self.leases[0]
+        if trigger is Trigger.LOST:
             if cur.holder is Holder.OPERATOR:
                 return book._expire_current(t, ExpireReason.COMMS_LOST)
             return Outcome(book)
-        if (link.lost and age is not None and age <= cfg.contact_gap and link.contact_since is not None
-                and t - link.contact_since >= cfg.regain_s):
-            book = replace(self, link=replace(link, lost=False))
-            if cur.holder is Holder.RETURN_SERVICE and cur.block is not None and cur.block.halt_on_regain:
-                return book._end_chain(t, ExpireReason.LINK_REGAINED)
-            return Outcome(book._arm(t))
-        return Outcome(self)
+        if cur.holder is Holder.RETURN_SERVICE and cur.block is not None and cur.block.halt_on_regain:
+            return book._end_chain(t, ExpireReason.LINK_REGAINED)
+        return Outcome(book._arm(t))
 
     # ----- execution leases --------------------------------------------------------------------------------
     def claim(self, sysid: int, epoch: int, index: int, t: float) -> tuple[Outcome, Check]:
@@ -488,7 +477,7 @@ class LeaseBook:
         return replace(self, queue=(*self.queue, command))
 
     def with_config(self, config: LeaseConfig) -> LeaseBook:
-        return replace(self, config=config)
+        return replace(self, config=config, link=self.link.with_config(config.watch))
 
     # ----- internals ---------------------------------------------------------------------------------------
     def _is_unclaimed_current(self, index: int) -> bool:
@@ -558,14 +547,14 @@ class LeaseBook:
         c = self.config
         return {
             "config": {"link_timeout": c.link_timeout, "regain_s": c.regain_s, "contact_gap": c.contact_gap,
-                       "rearm": c.rearm, "autogrant": c.autogrant, "stale_take": c.stale_take},
+                       "min_quality": c.min_quality, "rearm": c.rearm, "autogrant": c.autogrant,
+                       "stale_take": c.stale_take},
             "epoch": self.epoch, "owner": self.owner, "owner_compid": self.owner_compid,
             "leases": [lease(x) for x in self.leases], "next_index": self.next_index, "chains": self.chains,
             "plan": [{"payload": b.payload, "halt_on_regain": b.halt_on_regain} for b in self.plan],
             "claims": [[s, lid.epoch, list(lid.path)] for s, lid in self.claims],
             "queue": [[q.lease.epoch, list(q.lease.path), q.sender, q.payload] for q in self.queue],
-            "link": {"last_heard": self.link.last_heard, "contact_since": self.link.contact_since,
-                     "lost": self.link.lost},
+            "link": _link_snapshot(self.link),
             "last_reason": self.last_reason.name, "takeover_allowed": self.takeover_allowed,
             "last_epoch": self.last_epoch,
         }
@@ -580,15 +569,36 @@ class LeaseBook:
                            x["claimed"], x["chain"], tuple(x["newest_sub"]), x["started_at"])
             for x in snap["leases"]
         )
+        config = LeaseConfig(**snap["config"])
         return cls(
-            config=LeaseConfig(**snap["config"]), epoch=snap["epoch"], owner=snap["owner"],
+            config=config, epoch=snap["epoch"], owner=snap["owner"],
             owner_compid=snap["owner_compid"], leases=leases, next_index=snap["next_index"], chains=snap["chains"],
             plan=tuple(block(b) for b in snap["plan"]),  # type: ignore[misc]
             claims=tuple((s, LeaseId(e, tuple(p))) for s, e, p in snap["claims"]),
             queue=tuple(QueuedCommand(LeaseId(e, tuple(p)), s, _freeze(pl)) for e, p, s, pl in snap["queue"]),
-            link=OwnerLink(**snap["link"]), last_reason=ExpireReason[snap["last_reason"]],
+            link=_link_restore(config.watch, snap["link"]), last_reason=ExpireReason[snap["last_reason"]],
             takeover_allowed=snap["takeover_allowed"], last_epoch=snap["last_epoch"],
         )
+
+
+def _link_snapshot(link: LinkWatch) -> dict[str, Any]:
+    d = link.delivery
+    return {"last_heard": link.last_heard, "contact_since": link.contact_since,
+            "contact_packets": link.contact_packets, "lost": link.lost,
+            "quality_heard": link.quality_heard, "low": link.low,
+            "last_good": link.last_good,
+            "delivery": {"arrivals": [list(a) for a in d.arrivals], "newest": d.newest, "last_t": d.last_t,
+                         "repeats": d.repeats}}
+
+
+def _link_restore(config: WatchConfig, snap: dict[str, Any]) -> LinkWatch:
+    d = snap.get("delivery") or {}
+    delivery = Delivery(tuple((float(a), int(u)) for a, u in d.get("arrivals", ())), d.get("newest"),
+                        d.get("last_t"), d.get("repeats", 0))
+    return LinkWatch(config=config, last_heard=snap["last_heard"], contact_since=snap["contact_since"],
+                     contact_packets=snap.get("contact_packets", 0), lost=snap["lost"],
+                     last_good=snap.get("last_good"), delivery=delivery, quality_heard=snap.get("quality_heard"),
+                     low=snap.get("low", False))
 
 
 def _sub_is_live(sub: tuple[int, ...], newest: tuple[int, ...]) -> bool:

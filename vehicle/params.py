@@ -42,6 +42,8 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("TRL_MAX_PTS", 2000, 50, 100000, "", "memory bound of the trail", integer=True),
     ParamSpec("LEASE_AUTOGRANT", 1, 0, 1, "", "plain clients get the root implicitly", integer=True),
     ParamSpec("LEASE_STALE_TAKE", 1, 0, 1, "", "a silent owner may be taken over", integer=True),
+    ParamSpec("LNK_MIN_Q", 0.25, 0.0, 0.9, "",
+              "owner's packet delivery below this for LNK_TIMEOUT also counts as lost (0 = silence only)"),
 )
 BY_NAME = {s.name: s for s in SPECS}
 DEFAULTS_FILE = Path(__file__).resolve().parent.parent / "params" / "returnlink.parm"

@@ -14,6 +14,7 @@ import numpy as np
 
 from vehicle.trail import Trail
 
+SPEED_RANGE = (0.3, 2.0)  # m/s: stretch speeds worth copying (a crawl is a pause; beyond the teleop limit, a glitch)
 LINK_TAG_LAG_S = 1.0  # the link-quality estimate behind a crumb's tag averages over about this long
 
 
@@ -31,6 +32,8 @@ class Route:
     target: tuple[float, float] | None  # the chosen return target (may lie beyond a truncated route)
     target_index: int  # kept trail index of the target (-1 for HEADING)
     truncated: bool  # cut where it first leaves the max-displacement circle (FIG. 4C)
+    speeds: np.ndarray | None = None  # per point: the speed driven outbound on the stretch leaving it (m/s)
+    onward: Route | None = None  # LINK after a loss: the trail from the target back to its start (dead zones)
 
     @property
     def length(self) -> float:
@@ -80,24 +83,58 @@ def retrace(trail: Trail, start: tuple[float, float], goal: int) -> np.ndarray:
 
     A shortcut is taken only if it does not jump past the goal, so pruning never changes the target.
     """
+    return _retrace(trail, start, goal)[0]
+
+
+def _retrace(trail: Trail, start: tuple[float, float], goal: int,
+             first: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``retrace`` from kept index ``first`` (default: the newest), with, per route point, the kept index whose
+    outbound stretch (from index - 1 to index) the route drives next (-1: not known)."""
     pts = trail.points()
     out = [np.asarray(start, dtype=float)]
-    i = len(pts) - 1
+    idx = [-1]
+    i = len(pts) - 1 if first is None else first
     while i > goal:
         p = pts[i]
         out.append(p)
+        idx.append(i)
         s = trail.shortcut(i)
         if s >= 0 and s >= goal and s + 1 < i:
             # cross to the nearest point of the older segment, then carry on backwards from its start
             out.append(_closest_on_segment(p, pts[s], pts[s + 1]))
+            idx.append(s + 1)
             i = s
             continue
         i -= 1
     out.append(pts[goal])
+    idx.append(goal)
     route = np.array(out)
     keep = np.ones(len(route), dtype=bool)
     keep[1:] = np.hypot(*np.diff(route, axis=0).T) > 1e-9
-    return route[keep]
+    return route[keep], np.array(idx)[keep]
+
+
+def outbound_speeds(trail: Trail, idx: np.ndarray) -> np.ndarray:
+    """Per route point, the speed the robot drove the trail stretch it is about to retrace (RTL_SPEED=0), from
+    the crumbs' times; a point with no stretch of its own takes the next one's (nan if none is known)."""
+    pts, t = trail.points(), trail.times()
+    seg = np.full(len(pts), np.nan)
+    if len(pts) >= 2:
+        dt = np.diff(t)
+        dist = np.hypot(*np.diff(pts, axis=0).T)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            seg[1:] = np.where(dt > 1e-6, dist / np.where(dt > 1e-6, dt, 1.0), np.nan)
+    v = np.array([seg[i] if 1 <= i < len(seg) else np.nan for i in idx])
+    # a stretch slower than a crawl held a pause (or joins crumbs of different drives), one faster than the
+    # robot can go is an estimation glitch: neither is a pace to copy, the neighbours' is
+    v[(v < SPEED_RANGE[0]) | (v > SPEED_RANGE[1])] = np.nan
+    for k in range(len(v) - 2, -1, -1):  # the start and the trail's first point take their neighbour's stretch
+        if np.isnan(v[k]):
+            v[k] = v[k + 1]
+    for k in range(1, len(v)):
+        if np.isnan(v[k]):
+            v[k] = v[k - 1]
+    return v
 
 
 def truncate(route: np.ndarray, center: tuple[float, float], radius: float) -> tuple[np.ndarray, bool]:
@@ -118,19 +155,18 @@ def truncate(route: np.ndarray, center: tuple[float, float], radius: float) -> t
     return np.array(out), False
 
 
-def _beyond(pts: np.ndarray, goal: int, dist: float) -> list[np.ndarray]:
-    """Points continuing from kept point ``goal`` back toward the trail's start for ``dist`` metres."""
+def _head(pts: np.ndarray, dist: float) -> list[np.ndarray]:
+    """The points of polyline ``pts`` after its first, up to ``dist`` metres along it (the last one cut there)."""
     out: list[np.ndarray] = []
-    i, left = goal, dist
-    while i > 0 and left > 1e-9:
-        a, b = pts[i], pts[i - 1]
+    left = dist
+    for a, b in zip(pts[:-1], pts[1:], strict=True):
         seg = float(np.hypot(*(b - a)))
         if seg >= left:
-            out.append(a + (b - a) * (left / seg))
+            if seg > 1e-9:
+                out.append(a + (b - a) * (left / seg))
             break
         out.append(b)
         left -= seg
-        i -= 1
     return out
 
 
@@ -141,8 +177,10 @@ def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_dis
     ``overshoot`` extends a LINK route that far past the target crumb, further back along the trail: the
     navigator counts as arrived within RTL_ARRIVE_R of the route's end, and a return that stops that short of
     the last place the operator was heard stops on the fringe of coverage, not inside it.
+
+    A LINK route after a loss also carries ``onward``: the trail from the target back to its start, which the
+    service follows when the target turns out to be a dead zone (DESIGN §6).
     """
-    """The whole planning step: target, retraced route, displacement bound."""
     if target is Target.HEADING:
         s = np.asarray(start, dtype=float)
         end = s + max_displacement * np.array([math.cos(heading), math.sin(heading)])
@@ -152,11 +190,45 @@ def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_dis
     if goal < 0:
         s = np.asarray(start, dtype=float)
         return Route(np.array([s]), None, -1, False)
-    full = retrace(trail, start, goal)
+    full, idx = _retrace(trail, start, goal)
+    speeds = outbound_speeds(trail, idx)
     gx, gy = full[-1]
-    if overshoot > 0 and target is Target.LINK and link_lost:
-        extra = _beyond(trail.points(), goal, overshoot)
+    onward = None
+    if target is Target.LINK and link_lost:
+        # further back means along the retraced trail (shortcuts taken), not down the list of crumbs: the newest
+        # of those may have been laid by an earlier return, heading the other way
+        o_pts, o_idx = _retrace(trail, (float(gx), float(gy)), 0, first=goal)
+        onward = Route(o_pts, (float(o_pts[-1, 0]), float(o_pts[-1, 1])), 0, False, outbound_speeds(trail, o_idx))
+        extra = _head(o_pts, overshoot) if overshoot > 0 else []
         if extra:
             full = np.vstack([full, extra])
+            speeds = np.concatenate([speeds, np.full(len(extra), speeds[-1])])
     pts, cut = truncate(full, start, max_displacement)
-    return Route(pts, (float(gx), float(gy)), goal, cut)
+    return Route(pts, (float(gx), float(gy)), goal, cut, speeds[:len(pts)], onward)
+
+
+def continue_from(route: Route, at: tuple[float, float], search: float) -> Route:
+    """``route`` picked up at the point nearest ``at`` within its first ``search`` metres: where a return that
+    overshot a dead-zone target joins the trail further back."""
+    pts = route.points
+    if len(pts) < 2:
+        return Route(np.array([at]), route.target, route.target_index, route.truncated, None, None)
+    p = np.asarray(at, dtype=float)
+    best, best_d, walked = (0, pts[0]), math.inf, 0.0
+    for k in range(len(pts) - 1):
+        q = _closest_on_segment(p, pts[k], pts[k + 1])
+        d = float(np.hypot(*(q - p)))
+        if d < best_d:
+            best, best_d = (k, q), d
+        walked += float(np.hypot(*(pts[k + 1] - pts[k])))
+        if walked > search:
+            break
+    k, q = best
+    out = np.vstack([p, q, pts[k + 1:]])
+    sp = None
+    if route.speeds is not None:
+        sp = np.concatenate([[route.speeds[k], route.speeds[k]], route.speeds[k + 1:]])
+    keep = np.ones(len(out), dtype=bool)
+    keep[1:] = np.hypot(*np.diff(out, axis=0).T) > 1e-9
+    return Route(out[keep], route.target, route.target_index, route.truncated,
+                 None if sp is None else sp[keep], None)

@@ -26,7 +26,7 @@ from link.plan_items import (  # the MAV_CMD numbers of the items a plan may hol
 from vehicle.lease import ExpireReason, ServiceBlock
 from vehicle.navigation import FollowerConfig, Path, follow
 from vehicle.params import Params
-from vehicle.returning import LINK_TAG_LAG_S, Route, Target, plan_route, truncate
+from vehicle.returning import LINK_TAG_LAG_S, SPEED_RANGE, Route, Target, continue_from, plan_route, truncate
 from vehicle.trail import Trail
 
 SUPPORTED = (NAV_WAYPOINT, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_RETURN_TO_LINK)
@@ -100,6 +100,11 @@ class ServiceState:
     max_displacement: float
     best_remaining: float
     last_progress_at: float
+    stretch_speed: bool = False  # RTL_SPEED=0: drive each stretch at the speed it was driven outbound
+    onward: bool = False  # went on past a dead-zone target (DESIGN §6): the next arrival ends the block
+
+
+RETURN_SPEED_MIN, RETURN_SPEED_MAX = SPEED_RANGE  # m/s: within the robot's limits (MAX_TELEOP_SPEED)
 
 
 @dataclass(frozen=True)
@@ -150,9 +155,42 @@ def _next_item(st: ServiceState, x: float, y: float, t: float, trail: Trail, par
         route = Route(np.array([[x, y], [it.x, it.y]]), (it.x, it.y), -1, False)
         max_disp = math.inf
     path = Path(route.points) if route is not None and len(route.points) >= 2 else None
+    own_speed = it.command == NAV_RETURN_TO_LINK and it.param2 > 0
+    stretch = (params["RTL_SPEED"] == 0 and not own_speed and route is not None and route.speeds is not None
+               and it.command in (NAV_RETURN_TO_LINK, NAV_RETURN_TO_LAUNCH))
     st = replace(st, item=k, item_started_at=t, route=route, path=path, progress=0.0, speed=speed,
-                 max_displacement=max_disp, best_remaining=math.inf, last_progress_at=t)
+                 max_displacement=max_disp, best_remaining=math.inf, last_progress_at=t, stretch_speed=stretch,
+                 onward=False)
     return ServiceStep(st, 0.0, 0.0, replanned=True)
+
+
+def cruise(st: ServiceState) -> float:
+    """The speed to drive now: the block's fixed speed, or (RTL_SPEED=0) the speed this stretch of trail was
+    driven outbound, within the robot's limits."""
+    if not st.stretch_speed or st.route is None or st.route.speeds is None or st.path is None:
+        return st.speed
+    speeds = st.route.speeds
+    i = int(np.searchsorted(st.path.cum, st.progress, side="right")) - 1
+    v = float(speeds[min(max(i, 0), len(speeds) - 1)])
+    if not math.isfinite(v):
+        return st.speed
+    return min(RETURN_SPEED_MAX, max(RETURN_SPEED_MIN, v))
+
+
+def _go_on(st: ServiceState, x: float, y: float, t: float, params: Params, link_lost: bool) -> ServiceState | None:
+    """A RETURN_TO_LINK block at its target with the link still down goes on back along the trail, within its
+    displacement budget: a link-good tag is a promise the place may not keep (DESIGN §6). None: it may not."""
+    it = st.items[st.item]
+    route = st.route
+    if (it.command != NAV_RETURN_TO_LINK or not link_lost or st.onward or route is None or route.onward is None
+            or route.truncated):
+        return None
+    search = (st.path.length if st.path is not None else 0.0) + params["RTL_ARRIVE_R"]
+    nxt = _bounded_from(continue_from(route.onward, (x, y), search), st.start, st.max_displacement)
+    if len(nxt.points) < 2 or nxt.length <= params["RTL_ARRIVE_R"]:
+        return None
+    return replace(st, route=nxt, path=Path(nxt.points), progress=0.0, best_remaining=math.inf,
+                   last_progress_at=t, onward=True)
 
 
 def _bounded_from(route: Route, center: tuple[float, float], radius: float) -> Route:
@@ -173,9 +211,15 @@ def step(st: ServiceState, x: float, y: float, yaw: float, t: float, trail: Trai
         return ServiceStep(st, 0.0, 0.0)
     if st.path is None:
         return _next_item(st, x, y, t, trail, params, link_lost, outbound_speed)
+    if st.onward and not link_lost:
+        # past a dead-zone target only for want of the link: it is back (a block that continues on regain)
+        return ServiceStep(st, 0.0, 0.0, ExpireReason.COMPLETED)
     cfg = FollowerConfig(arrive_radius=params["RTL_ARRIVE_R"])
-    cmd = follow(st.path, x, y, yaw, st.progress, st.speed, cfg)
+    cmd = follow(st.path, x, y, yaw, st.progress, cruise(st), cfg)
     if cmd.arrived:
+        onward = _go_on(replace(st, progress=cmd.progress), x, y, t, params, link_lost)
+        if onward is not None:
+            return ServiceStep(onward, 0.0, 0.0, replanned=True)
         return _next_item(replace(st, progress=cmd.progress), x, y, t, trail, params, link_lost, outbound_speed)
     if cmd.remaining < st.best_remaining - 0.2:
         st = replace(st, best_remaining=cmd.remaining, last_progress_at=t)

@@ -1,0 +1,188 @@
+"""The owner's link watch as timelines (PX4 failsafe_test style): time is advanced by hand and the trigger is
+checked after each step. One story per rule of DESIGN §3.5 and §6 "Where the return ends" about the link."""
+
+from __future__ import annotations
+
+from vehicle.lease import ExpireReason, Holder, LeaseBook, LeaseConfig
+from vehicle.link_watch import GOOD_QUALITY, Delivery, LinkWatch, Trigger, WatchConfig
+
+GCS = 255
+RATE = 10.0  # packets/s, a ground station streaming teleop
+
+
+class Station:
+    """A sender with a MAVLink sequence number, feeding a watch as its packets arrive."""
+
+    def __init__(self, watch: LinkWatch, seq: int = 0) -> None:
+        self.watch = watch
+        self.seq = seq
+        self.triggers: list[tuple[float, Trigger]] = []
+
+    def send(self, t: float, arrives: bool = True) -> None:
+        if arrives:
+            self.watch = self.watch.heard(t, self.seq)
+        self.seq = (self.seq + 1) % 256
+
+    def step(self, t: float) -> Trigger:
+        self.watch, trig = self.watch.step(t)
+        if trig is not Trigger.NONE:
+            self.triggers.append((t, trig))
+        return trig
+
+    def run(self, t0: float, t1: float, arrives=lambda k, t: True, dt: float = 0.02) -> None:
+        """50 Hz ticks from t0 to t1, a packet every 1/RATE s (``arrives(k, t)`` says whether packet k gets
+        through)."""
+        n0, n1 = round(t0 / dt), round(t1 / dt)
+        every = round(1 / RATE / dt)
+        for n in range(n0, n1):
+            t = n * dt  # a product, not a sum: the watch must cope with 2.9999999999999964 as well
+            if n % every == 0:
+                self.send(t, arrives(n // every, t))
+            self.step(t)
+
+
+def cfg(**kw) -> WatchConfig:
+    return WatchConfig(**{"timeout": 3.0, "regain_s": 1.0, "contact_gap": 1.5, "min_quality": 0.25, **kw})
+
+
+def test_regain_comes_regain_s_after_the_link_is_back_however_long_the_outage():
+    for outage in (4.0, 8.0, 30.0):
+        st = Station(LinkWatch(cfg()))
+        st.run(0.0, 10.0)
+        st.run(10.0, 10.0 + outage, arrives=lambda k, t: False)  # packets sent but lost: the sequence advances
+        back = 10.0 + outage
+        st.run(back, back + 5.0)
+        (lost_t, lost), (reg_t, reg) = st.triggers
+        assert lost is Trigger.LOST and abs(lost_t - (10.0 - 0.1 + 3.0)) < 0.021
+        assert reg is Trigger.REGAINED
+        assert back + 1.0 - 1e-9 <= reg_t <= back + 1.0 + 0.021, (outage, reg_t)
+
+
+def test_a_jump_of_more_than_128_sequence_numbers_is_an_outage_not_a_reorder():
+    st = Station(LinkWatch(cfg()))
+    st.run(0.0, 5.0)
+    st.seq = (st.seq + 200) % 256  # 200 packets lost in a 4 s outage at 50 Hz
+    st.run(5.0, 9.0, arrives=lambda k, t: False)
+    st.run(9.0, 12.0)
+    assert [trig for _, trig in st.triggers] == [Trigger.LOST, Trigger.REGAINED]
+    assert st.triggers[1][0] <= 10.0 + 0.021
+
+
+def test_contact_from_before_the_loss_never_counts_as_regained():
+    """LNK_TIMEOUT below LNK_GOOD_S: the loss must not be 'regained' by the packet that came before it."""
+    st = Station(LinkWatch(cfg(timeout=0.5, contact_gap=1.5)))
+    st.run(0.0, 5.0)
+    st.run(5.0, 5.8, arrives=lambda k, t: False)  # 0.8 s silent: lost after 0.5 s
+    for n in range(290, 300):
+        st.step(n * 0.02)
+    assert [trig for _, trig in st.triggers] == [Trigger.LOST]
+    st.run(5.8, 8.0)
+    assert [trig for _, trig in st.triggers] == [Trigger.LOST, Trigger.REGAINED]
+    assert 6.8 - 1e-9 <= st.triggers[1][0] <= 6.8 + 0.021
+
+
+def test_timeout_deadline_is_not_missed_by_float_error():
+    w = LinkWatch(cfg()).heard(30.8, 0)
+    assert 33.8 - 30.8 < 3.0  # the float trap itself
+    _, trig = w.step(33.8)
+    assert trig is Trigger.LOST
+
+
+def test_reordering_and_duplicates_are_not_loss():
+    # 40 % of packets swapped with the next one, every packet duplicated: nothing is lost
+    d = Delivery()
+    seq = list(range(300))
+    for k in range(0, 300, 5):  # swap pairs: 2 of every 5 packets out of order
+        seq[k], seq[k + 1] = seq[k + 1], seq[k]
+    for k, s in enumerate(seq):
+        t = k * 0.1
+        d = d.heard(s % 256, t, 3.0, 3.0)
+        d = d.heard(s % 256, t + 0.01, 3.0, 3.0)
+        # a packet overtaken by the next one is a hole only until it arrives
+        assert d.ratio(t + 0.01, 1.0) >= GOOD_QUALITY, k
+    assert d.ratio(29.9, 1.0) == 1.0
+    w = LinkWatch(cfg())
+    for k, s in enumerate(seq):
+        w = w.heard(k * 0.1, s % 256).heard(k * 0.1 + 0.01, s % 256)
+        assert w.good(k * 0.1 + 0.01) and w.contact_since == 0.0, k  # contact never broken
+
+
+def test_duplicates_do_not_hide_loss():
+    """Half the packets lost, each survivor duplicated and the copy arriving late: delivery is a half, not 1."""
+    d = Delivery()
+    sent = [k for k in range(1, 200, 2)]
+    arrivals = [sent[0]] + [x for a, b in zip(sent[1:], sent, strict=False) for x in (a, b)]
+    for n, s in enumerate(arrivals):
+        d = d.heard(s % 256, n * 0.1, 3.0, 3.0)
+    assert abs(d.ratio(len(arrivals) * 0.1, 3.0) - 0.5) < 0.1
+
+
+def test_loss_is_measured_over_the_window():
+    d = Delivery()
+    for k in range(100):
+        if k % 2:
+            d = d.heard(k, k * 0.1, 3.0, 3.0)
+    assert abs(d.ratio(9.9, 1.0) - 0.5) < 0.11
+    w = LinkWatch(cfg())
+    for k in range(100):
+        if k % 2:
+            w = w.heard(k * 0.1, k)
+    assert not w.good(9.9)  # a link-good crumb needs a good delivery, not just a recent packet
+
+
+def test_a_sender_that_never_advances_its_sequence_is_not_perfect():
+    w = LinkWatch(cfg())
+    for k in range(50):
+        w = w.heard(k * 0.1, 7)
+    assert w.quality(5.0) is None
+    assert not w.good(5.0)
+
+
+def test_marginal_delivery_counts_as_lost_after_the_timeout():
+    """LNK_MIN_Q: one packet in eight gets through; the lucky ones keep the silence timer from firing."""
+    st = Station(LinkWatch(cfg()))
+    st.run(0.0, 10.0)
+    st.run(10.0, 30.0, arrives=lambda k, t: k % 8 == 0)
+    assert [trig for _, trig in st.triggers][:1] == [Trigger.LOST]
+    assert st.triggers[0][0] <= 10.0 + 3.0 + 1.0  # within about a timeout of the delivery falling
+
+
+def test_silence_only_when_min_quality_is_zero():
+    st = Station(LinkWatch(cfg(min_quality=0.0)))
+    st.run(0.0, 10.0)
+    st.run(10.0, 30.0, arrives=lambda k, t: k % 8 == 0)
+    assert st.triggers == []
+
+
+def test_lease_book_consumes_the_trigger():
+    book = LeaseBook(config=LeaseConfig(link_timeout=0.5, contact_gap=1.5)).acquire(GCS, 190, 0.0).book
+    t, seq = 0.0, 0
+    events = []
+    for n in range(1, 400):
+        t = n * 0.02
+        if n % 5 == 0 and not 100 <= n < 140:  # silent from 2.0 s to 2.8 s
+            book = book.heard(GCS, t, seq)
+        seq += n % 5 == 0
+        out = book.tick(t)
+        book = out.book
+        events += [(e.t, e.reason) for e in out.events]
+    reasons = [r for _, r in events]
+    assert reasons == [ExpireReason.COMMS_LOST, ExpireReason.LINK_REGAINED]
+    assert events[1][0] - events[0][0] >= 1.0 - 1e-9
+    assert book.current.holder is Holder.OPERATOR and not book.current.claimed
+
+
+def test_two_lucky_packets_are_not_a_regained_link():
+    """After a loss, two heartbeats a second apart do not make LINK_REGAINED; a stream for LNK_REGAIN_S does."""
+    st = Station(LinkWatch(cfg()))
+    st.run(0.0, 5.0)
+    st.run(5.0, 10.0, arrives=lambda k, t: False)
+    assert [trig for _, trig in st.triggers] == [Trigger.LOST]
+    st.send(10.0)
+    st.step(10.0)
+    st.send(11.0)
+    for n in range(550, 600):
+        st.step(n * 0.02)
+    assert [trig for _, trig in st.triggers] == [Trigger.LOST]
+    st.run(12.0, 14.0)
+    assert [trig for _, trig in st.triggers] == [Trigger.LOST, Trigger.REGAINED]

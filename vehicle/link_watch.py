@@ -1,0 +1,215 @@
+"""The owner's link, watched in one place: is it up, is it good, has it just been lost or regained (DESIGN §3.5, §6).
+
+Why a value of its own (STYLE §2, Spot's ``LeaseKeepAlive`` beside its ``LeaseWallet``): the lease ledger decides
+*what happens* on COMMS_LOST and LINK_REGAINED; this module decides *whether* they happened. Both were spread over
+the lease book, the vehicle loop and a link-quality helper, and each place had its own idea of "good".
+
+Two measurements, both pure functions of the packets heard and the time passed in:
+
+* **Delivery** (``Delivery``): the share of the owner's packets that arrive, from MAVLink sequence numbers, kept
+  like a receiver window (RFC 3550 style): every distinct packet of the last ``window`` seconds, unwrapped into a
+  monotonic sequence space. A duplicate is counted once, a reordered packet fills its hole instead of counting as
+  a loss, and a sender whose sequence number never advances is *unmeasurable* (``ratio`` None), not perfect. A
+  gap in uint8 sequence space says nothing about how many packets an outage swallowed (a jump of more than 128 is
+  ambiguous, and even a small one may have wrapped), so after a silence of LNK_TIMEOUT (or one long enough to
+  wrap at the sender's rate) the window restarts: the outage is already measured by time, and counting it again
+  as loss would only delay the regain.
+* **Contact** (``LinkWatch``): when the owner was last heard, since when it has been heard well without a break,
+  and whether the link is lost. ``step(t)`` says LOST (silent for LNK_TIMEOUT, or delivery below LNK_MIN_Q over
+  LNK_TIMEOUT) or REGAINED (heard well, without a break, for LNK_REGAIN_S, by contact that began *after* the loss,
+  so a timeout shorter than LNK_GOOD_S cannot make the two alternate).
+
+Deadlines are compared with a tolerance of ``EPS``: in floating point 33.8 - 30.8 is 2.9999999999999964, and a tick
+must not fire one period late because of it.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field, replace
+
+EPS = 1e-6  # s: deadline tolerance (far below the 20 ms tick, far above float error)
+GOOD_QUALITY = 0.8  # delivery at or above this is a good link (crumb tags, continuous contact)
+SEQ_SPACE = 256  # MAVLink's uint8 sequence number
+MAX_WINDOW_PACKETS = 1024  # memory bound of the receiver window (a fast sender shortens the window it covers)
+STUCK_REPEATS = 3  # arrivals of one sequence number, none advancing, after which a sender is unmeasurable
+REGAIN_PACKETS = 3  # good packets a regained contact needs at least: two lucky heartbeats a second apart are not
+# a link (on a working link a ground station's stream brings ten times as many within LNK_REGAIN_S)
+
+
+class Trigger(enum.Enum):
+    """What ``LinkWatch.step`` found."""
+
+    NONE = "none"
+    LOST = "lost"
+    REGAINED = "regained"
+
+
+@dataclass(frozen=True)
+class WatchConfig:
+    """The LNK_* parameters the watch depends on."""
+
+    timeout: float = 3.0  # LNK_TIMEOUT
+    regain_s: float = 1.0  # LNK_REGAIN_S
+    contact_gap: float = 1.5  # LNK_GOOD_S: the longest silence that still counts as continuous contact
+    min_quality: float = 0.25  # LNK_MIN_Q (0 = silence only)
+    window: float = 1.0  # s: the delivery estimate behind "good" covers about this long
+
+
+@dataclass(frozen=True)
+class Delivery:
+    """A receiver window over one sender's sequence numbers: which distinct packets arrived, and when."""
+
+    arrivals: tuple[tuple[float, int], ...] = ()  # (time, unwrapped seq) of distinct packets, oldest first
+    newest: int | None = None  # highest unwrapped sequence number seen
+    last_t: float | None = None  # time of the last arrival (duplicates included)
+    repeats: int = 0  # arrivals in a row that did not advance the sequence number
+
+    def heard(self, seq: int, t: float, horizon: float, outage: float) -> Delivery:
+        """One packet with sequence number ``seq`` at ``t``; the window keeps ``horizon`` seconds. After a silence
+        of ``outage`` seconds, or one long enough for the sequence number to have wrapped at the sender's rate,
+        the window restarts: the gap no longer says how many packets were lost."""
+        seq %= SEQ_SPACE
+        if self.newest is None or self.last_t is None:
+            return Delivery(((t, seq),), seq, t, 0)
+        silence = t - self.last_t
+        interval = self.interval()
+        if silence >= outage - EPS or (interval is not None and silence >= (SEQ_SPACE // 2) * interval):
+            return Delivery(((t, seq),), seq, t, 0)
+        d = (seq - self.newest) % SEQ_SPACE
+        if d == 0:
+            return replace(self, last_t=t, repeats=self.repeats + 1)
+        if d < SEQ_SPACE // 2:
+            u = self.newest + d
+            return Delivery(_trim((*self.arrivals, (t, u)), t - horizon), u, t, 0)
+        u = self.newest - (SEQ_SPACE - d)  # behind the newest: a late packet or a duplicate of one
+        first_t, first_u = self.arrivals[0]
+        if any(a == u for _, a in self.arrivals) or (u < first_u and first_t <= t - horizon):
+            return replace(self, last_t=t)  # a duplicate, or older than the window remembers
+        arrivals = tuple(sorted((*self.arrivals, (t, u)), key=lambda a: a[1]))
+        return replace(self, arrivals=_trim(arrivals, t - horizon), last_t=t)
+
+    def interval(self) -> float | None:
+        """The sender's mean time between packets over the window (None until it can be told)."""
+        a = self.arrivals
+        if len(a) < 2:
+            return None
+        span_t = max(x for x, _ in a) - min(x for x, _ in a)
+        span_u = a[-1][1] - a[0][1]
+        return span_t / span_u if span_t > 0 and span_u > 0 else None
+
+    def covers(self, t: float, window: float) -> bool:
+        """Whether the window reaches ``window`` seconds back from ``t`` (a ratio over it is a full measure)."""
+        return bool(self.arrivals) and self.arrivals[0][0] <= t - window + EPS
+
+    def ratio(self, t: float, window: float) -> float | None:
+        """Share of the packets sent in the last ``window`` seconds that arrived; None when it cannot be told
+        (nothing heard yet, or a sender that never advances its sequence number)."""
+        if self.newest is None:
+            return None
+        if self.repeats >= STUCK_REPEATS:
+            return None
+        since = t - window - EPS
+        inside = [u for ta, u in self.arrivals if ta > since]
+        if not inside:
+            return 0.0
+        before = [u for ta, u in self.arrivals if ta <= since]
+        first = max(before) if before else min(inside) - 1
+        sent = max(inside) - first
+        return min(1.0, len(inside) / sent) if sent > 0 else 1.0
+
+
+def _trim(arrivals: tuple[tuple[float, int], ...], since: float) -> tuple[tuple[float, int], ...]:
+    """Drop arrivals older than ``since`` except the newest of them (the reference for what was sent since)."""
+    k = 0
+    while k + 1 < len(arrivals) and arrivals[k + 1][0] <= since:
+        k += 1
+    k = max(k, len(arrivals) - MAX_WINDOW_PACKETS)
+    return arrivals[k:]
+
+
+@dataclass(frozen=True)
+class LinkWatch:
+    """The owner's link as the vehicle knows it. Immutable; ``heard`` and ``step`` return new values."""
+
+    config: WatchConfig = field(default_factory=WatchConfig)
+    last_heard: float | None = None
+    contact_since: float | None = None  # start of the current run of good, unbroken contact (after any loss)
+    contact_packets: int = 0  # packets heard in that run
+    lost: bool = False  # LOST fired and REGAINED has not yet
+    last_good: float | None = None  # the last packet heard with a good delivery (settles the crumbs' link tags)
+    delivery: Delivery = field(default_factory=Delivery)
+    # measured when the last packet came (between packets only silence changes, and the timeout measures that):
+    # the 50 Hz tick reads two values instead of walking the window
+    quality_heard: float | None = None  # delivery over ``window``
+    low: bool = False  # delivery over a full LNK_TIMEOUT below LNK_MIN_Q
+
+    # ----- inputs ------------------------------------------------------------------------------------------
+    def heard(self, t: float, seq: int | None = None) -> LinkWatch:
+        """A packet from the owner at ``t``. Without ``seq`` (a transport with no sequence numbers) the packet is
+        taken as good; with it, only a measured good delivery keeps contact unbroken."""
+        cfg = self.config
+        delivery, q, low = self.delivery, self.quality_heard, self.low
+        if seq is not None:
+            delivery = delivery.heard(seq, t, max(cfg.window, cfg.timeout), cfg.timeout)
+            q, low = delivery.ratio(t, cfg.window), _low(delivery, t, cfg)
+        if not (seq is None or _good(q)):
+            return replace(self, last_heard=t, contact_since=None, contact_packets=0, delivery=delivery,
+                           quality_heard=q, low=low)
+        unbroken = (self.contact_since is not None and self.last_heard is not None
+                    and t - self.last_heard <= cfg.contact_gap + EPS)
+        return replace(self, last_heard=t, contact_since=self.contact_since if unbroken else t, last_good=t,
+                       contact_packets=self.contact_packets + 1 if unbroken else 1,
+                       delivery=delivery, quality_heard=q, low=low)
+
+    def step(self, t: float) -> tuple[LinkWatch, Trigger]:
+        """Evaluate the deadlines at ``t``: LOST, REGAINED or nothing."""
+        cfg = self.config
+        age = self.age(t)
+        if age is None:
+            return self, Trigger.NONE
+        if not self.lost:
+            if age >= cfg.timeout - EPS or self.low:
+                # contact from before the loss never counts toward the regain
+                return replace(self, lost=True, contact_since=None, contact_packets=0), Trigger.LOST
+            return self, Trigger.NONE
+        if (self.contact_since is not None and age <= cfg.contact_gap + EPS
+                and t - self.contact_since >= cfg.regain_s - EPS
+                and (self.delivery.newest is None or self.contact_packets >= REGAIN_PACKETS)):
+            return replace(self, lost=False), Trigger.REGAINED
+        return self, Trigger.NONE
+
+    def with_config(self, config: WatchConfig) -> LinkWatch:
+        low = self.low if self.last_heard is None else _low(self.delivery, self.last_heard, config)
+        return replace(self, config=config, low=low)
+
+    # ----- queries -----------------------------------------------------------------------------------------
+    def age(self, t: float) -> float | None:
+        return None if self.last_heard is None else t - self.last_heard
+
+    def quality(self, t: float) -> float | None:
+        """The owner's packet delivery over the last ``window`` seconds (None: not measurable)."""
+        return self.delivery.ratio(t, self.config.window)
+
+    def good(self, t: float) -> bool:
+        """The link tag of a crumb laid now: the owner heard within LNK_GOOD_S, with a good measured delivery
+        (or no sequence numbers to measure it by)."""
+        age = self.age(t)
+        if age is None or age > self.config.contact_gap + EPS:
+            return False
+        if self.delivery.newest is None:
+            return True
+        return _good(self.quality_heard)
+
+
+def _low(delivery: Delivery, t: float, cfg: WatchConfig) -> bool:
+    """LNK_MIN_Q: the owner's delivery over the last LNK_TIMEOUT (a full window of it) is below the minimum.
+    Lucky packets reset the silence timer; they do not lift the delivery over a whole timeout."""
+    if cfg.min_quality <= 0 or not delivery.covers(t, cfg.timeout):
+        return False
+    q = delivery.ratio(t, cfg.timeout)
+    return q is not None and q < cfg.min_quality - EPS
+
+
+def _good(q: float | None) -> bool:
+    return q is not None and q >= GOOD_QUALITY - EPS
