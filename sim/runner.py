@@ -188,9 +188,9 @@ class Run:
     def _transmit(self, st: StationSim, src: str, dst: str, data: bytes, t: float) -> None:
         if st.state is None or self._jammed(st.name, t):
             return
-        latency = self.radio.packet(st.state)
-        if latency is not None:
-            self.bus.send(src, dst, data, t + latency)
+        at = self.radio.arrival(st.state, t, (src, dst))
+        if at is not None:
+            self.bus.send(src, dst, data, at)
 
     def _radio_status(self, t: float) -> None:
         """The operator's telemetry radio reports both ends' RSSI, as a SiK radio would."""

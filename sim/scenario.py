@@ -216,7 +216,9 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
     radio_kw = {}
     for fname in RadioParams.__dataclass_fields__:
         if fname in radio_raw:
-            radio_kw[fname] = r.number(radio_raw, fname, f"radio.{fname}")
+            flag = isinstance(getattr(RadioParams, fname), bool)  # an option (reorder), not a number
+            radio_kw[fname] = (r.get(radio_raw, fname, f"radio.{fname}", bool) if flag
+                               else r.number(radio_raw, fname, f"radio.{fname}"))
     for k in radio_raw:
         if k not in RadioParams.__dataclass_fields__:
             raise r.fail(f"radio.{k}", "unknown radio field")

@@ -9,6 +9,7 @@ from vehicle.lease import (
     Holder,
     LeaseBook,
     LeaseConfig,
+    LeaseEvent,
     LeaseId,
     QueuedCommand,
     RejectReason,
@@ -225,3 +226,14 @@ def test_new_epoch_differs_from_previous():
         nxt = book.acquire(GCS, 190, float(k), seed=k).book
         assert nxt.epoch != book.epoch and nxt.epoch != 0
         book = nxt
+
+
+def test_every_lease_statustext_fits_one_chunk():
+    """A lease event is announced in one STATUSTEXT (50 characters): a two-chunk text arrives in pieces."""
+    for epoch in (1, 65535):
+        for expired in (None, 0, 65534):
+            for current in (None, 0, 65534):
+                for reason in ExpireReason:
+                    for holder in Holder:
+                        text = LeaseEvent(0.0, epoch, expired, current, reason, holder).describe()
+                        assert len(text.encode()) <= 50, text
