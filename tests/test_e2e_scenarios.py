@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +32,30 @@ def _run_file(tmp_path, base: str, extra: str) -> tuple[Run, dict]:
     r = Run(load(str(path))).run()
     r.metrics = metrics.compute(r)
     return r, r.metrics
+
+
+def _one_block_variant(tmp_path, base: str, seed: int, vehicle: str) -> tuple[Run, dict]:
+    """The scenario with its plan cut to one RETURN_TO_LINK block, so the return itself is all that runs."""
+    text = (Path(sim.__file__).parent / "scenarios" / f"{base}.toml").read_text()
+    text = re.sub(r"\nplan = \[.*?\n\]", '\nplan = [{ command = "RETURN_TO_LINK", max_displacement = 60.0 }]',
+                  text, flags=re.S)
+    path = tmp_path / f"{base}-one-block.toml"
+    path.write_text(text)
+    r = Run(load(str(path)), vehicle, seed).run()
+    r.metrics = metrics.compute(r)
+    return r, r.metrics
+
+
+@pytest.mark.parametrize("vehicle", ["rover", "legged"])
+def test_the_return_does_not_hit_the_adit_wall(tmp_path, vehicle):
+    """tunnel, seed 3, one return block: the follower used to swing a forward U-turn at the bend into the inner
+    corner. It backs out along its trail instead (the outbound drive touched no wall)."""
+    r, m = _one_block_variant(tmp_path, "tunnel", 3, vehicle)
+    assert len(r.blocks) >= 1 and r.blocks[0].distance > 1.0
+    assert m["collisions"] == 0
+    k0, k1 = (int(round(t / DT)) - 1 for t in (r.blocks[0].started, r.blocks[0].ended))
+    cmd = np.array(r.trace.cmd[k0:k1])
+    assert (cmd[:, 0] < 0).any()  # it backed up
 
 
 @pytest.mark.parametrize("vehicle", ["rover", "legged"])
