@@ -29,7 +29,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-BUILTIN = ("tunnel", "warehouse", "loop", "open", "handover")
+BUILTIN = ("tunnel", "warehouse", "loop", "open", "handover", "building", "culvert")
 # scenario names for the mission items of a return plan
 PLAN_COMMANDS = {"RETURN_TO_LINK": NAV_RETURN_TO_LINK, "BOUNDARY": LEASE_BOUNDARY, "LOITER": NAV_LOITER_TIME,
                  "RETURN_TO_LAUNCH": NAV_RETURN_TO_LAUNCH, "WAYPOINT": NAV_WAYPOINT}

@@ -69,7 +69,7 @@ def test_scenario_meets_its_criteria(name, vehicle):
 
 
 @pytest.mark.parametrize("vehicle", ["rover", "legged"])
-@pytest.mark.parametrize("name", ["tunnel", "warehouse", "loop", "open"])
+@pytest.mark.parametrize("name", ["tunnel", "warehouse", "loop", "open", "building", "culvert"])
 def test_return_begins_within_one_tick_of_the_timeout(name, vehicle):
     r, m = run(name, vehicle)
     assert m["reaction_latency_s"] is not None
@@ -77,7 +77,7 @@ def test_return_begins_within_one_tick_of_the_timeout(name, vehicle):
 
 
 @pytest.mark.parametrize("vehicle", ["rover", "legged"])
-@pytest.mark.parametrize("name", ["tunnel", "warehouse", "loop", "open"])
+@pytest.mark.parametrize("name", ["tunnel", "warehouse", "loop", "open", "building", "culvert"])
 def test_stops_soon_after_the_link_is_back_and_inside_the_displacement_limit(name, vehicle):
     r, m = run(name, vehicle)
     params = r.vehicle.params
@@ -91,6 +91,22 @@ def test_stops_soon_after_the_link_is_back_and_inside_the_displacement_limit(nam
         path = np.array(r.trace.true[k0:k1 + 25])  # and the half second it takes to come to a stop
         past = float(np.hypot(*np.diff(path, axis=0).T).sum())
         assert past <= params["LNK_REGAIN_S"] * speed + params["RTL_ARRIVE_R"], f"drove {past:.2f} m past"
+
+
+@pytest.mark.parametrize("vehicle", ["rover", "legged"])
+@pytest.mark.parametrize("name, seed", [("building", 3), ("culvert", 3)])
+def test_the_return_scenarios_hold_for_another_seed(name, seed, vehicle):
+    """building and culvert stress the return (a doorway, two bends, a 5 m budget per lease): not one lucky seed."""
+    r, m = run(name, vehicle, seed)
+    assert m["passed"], m["failures"]
+    assert m["collisions"] == 0 and m["distance_back_m"] >= 1.0
+
+
+def test_culvert_needs_more_than_one_block_of_its_chain():
+    r, m = run("culvert", "rover")
+    assert len(r.blocks) >= 2 and r.blocks[0].reason == "COMPLETED"
+    assert r.blocks[0].max_disp <= 5.0 + metrics.DISPLACEMENT_SLACK
+    assert m["link_regained_s"] is not None and m["link_regained_s"] > r.blocks[1].started
 
 
 def test_handover_refuses_the_first_station_after_takeover():

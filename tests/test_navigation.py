@@ -7,6 +7,9 @@ import math
 import numpy as np
 import pytest
 
+from sim.robots import make_robot
+from sim.world import World
+from vehicle.app import velocity_to_command
 from vehicle.navigation import FollowerConfig, Path, follow
 
 NORTH = 0.0
@@ -71,3 +74,29 @@ def test_the_follower_never_drives_with_a_large_heading_error():
         travel = yaw + (math.pi if cmd.speed < 0 else 0.0)
         err = abs((math.atan2(ty - pts[0, 1], tx - pts[0, 0]) - travel + math.pi) % (2 * math.pi) - math.pi)
         assert err <= cfg.turn_in_place + 1e-9
+
+
+def test_a_velocity_target_far_off_the_heading_turns_in_place_first():
+    """Teleop after a return: the robot faces into the culvert, the operator asks to go out. No swinging arc."""
+    for off in (70.0, 120.0, 175.0):  # well to the side, behind
+        a = math.radians(off)
+        speed, turn = velocity_to_command(math.cos(a), math.sin(a), None, NORTH)
+        assert speed == 0.0 and turn > 0.5
+    a = math.radians(30.0)  # 30 degrees off: within the threshold, drive the share along the heading and turn
+    speed, turn = velocity_to_command(math.cos(a), math.sin(a), None, NORTH)
+    assert speed == pytest.approx(math.cos(a)) and turn > 0
+
+
+@pytest.mark.parametrize("kind", ["rover", "legged"])
+def test_both_robots_drive_backward(kind):
+    world = World(())
+    robot = make_robot(kind, world, 0.0, 0.0, 0.0, np.random.default_rng(0))
+    for _ in range(200):
+        robot.command(-0.5, 0.0)
+        robot.before_step(0.02)
+        world.step(0.02)
+        robot.after_step(0.02)
+    assert robot.true_speed == pytest.approx(-0.5, abs=0.02)
+    assert robot.pose[0] < -1.5
+    if kind == "legged":
+        assert robot.steps > 0  # it walked (trotted) backward, touchdown by touchdown
