@@ -152,3 +152,25 @@ def test_same_scenario_and_seed_give_identical_metrics():
     assert a == b
     c = metrics.compute(Run(load("loop"), "rover", 8).run())
     assert c["lease_events"] != a["lease_events"] or c["estimator_rmse_m"] != a["estimator_rmse_m"]
+
+
+@pytest.mark.parametrize("vehicle", ["rover", "legged"])
+def test_a_return_pressed_against_rock_ends_stuck_without_poisoning_the_estimate(tmp_path, vehicle):
+    """tunnel with a one-waypoint plan straight into the end of the drift: the robot reaches the rock and its
+    wheels spin (its feet slip). The block used to run on dead reckoning toward an estimated arrival; now the
+    odometry's disagreement with the accelerometer ends it STUCK within seconds, the estimate where the robot is."""
+    text = (Path(sim.__file__).parent / "scenarios" / "tunnel.toml").read_text()
+    text = re.sub(r"\nplan = \[.*?\n\]", '\nplan = [{ command = "WAYPOINT", x = 61.2, y = 21.2 }]', text, flags=re.S)
+    path = tmp_path / "tunnel-into-the-rock.toml"
+    path.write_text(text)
+    r = Run(load(str(path)), vehicle).run()
+    blk = r.blocks[0]
+    assert blk.reason == "STUCK"
+    k0, k1 = (int(round(t / DT)) - 1 for t in (blk.started, blk.ended))
+    true, est = np.array(r.trace.true[k0:k1 + 1]), np.array(r.trace.est[k0:k1 + 1])
+    steps = np.hypot(*np.diff(true, axis=0).T)
+    stopped = np.flatnonzero((np.cumsum(steps) > 2.0) & (steps < 0.05 * DT))
+    assert len(stopped) > 0 and r.world.collisions >= 1  # it drove up to the rock and stopped against it
+    held = (len(steps) - stopped[0]) * DT
+    assert held < 5.0  # not the 15 s of "no progress" it took before, nor an "arrival"
+    assert float(np.hypot(*(true[-1] - est[-1]))) < 1.5
