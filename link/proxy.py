@@ -50,19 +50,20 @@ class RadioProxy:
         if self.radio is not None:
             self.state = self.radio.link(self.antenna, self.power_dbm, self.robot())
 
-    def _fate(self, t: float) -> float | None:
+    def _fate(self, t: float, lane: str) -> float | None:
+        """Arrival time of a datagram sent at ``t`` toward ``lane`` ("up" or "down"); the radio keeps each
+        direction's order, so the heap releases them as sent."""
         if self.radio is None or self.state is None:
             return t
-        latency = self.radio.packet(self.state)
-        if latency is None:
+        at = self.radio.arrival(self.state, t, lane)
+        if at is None:
             self.lost += 1
-            return None
-        return t + latency
+        return at
 
     def from_ground(self, t: float) -> list[tuple[bytes, Address]]:
         """Datagrams from the ground stations that reach the vehicle by ``t``, with the address each came from."""
         for data, addr in self.transport.receive():
-            at = self._fate(t)
+            at = self._fate(t, "up")
             if at is not None:
                 heapq.heappush(self._up, (at, next(self._seq), data, addr))
         out = []
@@ -72,7 +73,7 @@ class RadioProxy:
         return out
 
     def to_ground(self, data: bytes, t: float) -> None:
-        at = self._fate(t)
+        at = self._fate(t, "down")
         if at is not None:
             heapq.heappush(self._down, (at, next(self._seq), data))
 

@@ -59,7 +59,7 @@ class Rig:
         self.robot.after_step(DT)
         self.t += DT
         r = self.sensors.read(self.t, DT)
-        self.estimator.predict(r.speed, r.yaw_rate, self.t)
+        self.estimator.predict(r.speed, r.yaw_rate, self.t, r.accel)
         if r.heading is not None:
             self.estimator.heading(r.heading, r.heading_std)
         tx, ty, _ = self.robot.pose
@@ -80,11 +80,11 @@ class Rig:
         cfg = cfg or FollowerConfig()
         p0 = self.estimator.pose
         path = Path(np.vstack([[p0.x, p0.y], points]))
-        progress, end = 0.0, self.t + timeout
+        progress, end, reverse = 0.0, self.t + timeout, False
         while self.t < end:
             p = self.estimator.pose
-            cmd = follow(path, p.x, p.y, p.yaw, progress, speed, cfg)
-            progress = cmd.progress
+            cmd = follow(path, p.x, p.y, p.yaw, progress, speed, cfg, reverse)
+            progress, reverse = cmd.progress, cmd.reverse
             if cmd.arrived:
                 self.step(0.0, 0.0, link_good)
                 return True

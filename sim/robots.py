@@ -44,6 +44,7 @@ class Robot:
         self.yaw_rate = 0.0
         self.odometer = 0.0
         self.true_speed = 0.0
+        self.accel = 0.0  # true forward acceleration of the body (what an accelerometer feels), m/s^2
 
     def command(self, speed: float, yaw_rate: float) -> None:
         self.cmd_speed = max(-self.max_speed, min(self.max_speed, speed))
@@ -73,7 +74,9 @@ class Robot:
     def after_step(self, dt: float) -> None:
         vx, vy = self.body.velocity
         a = self.body.angle
-        self.true_speed = vx * math.cos(a) + vy * math.sin(a)
+        speed = vx * math.cos(a) + vy * math.sin(a)
+        self.accel = (speed - self.true_speed) / dt
+        self.true_speed = speed
         self.odometer += abs(self.true_speed) * dt
 
     @property
@@ -200,8 +203,9 @@ class Legged(Robot):
                 self.feet[i] = (hx + ahead * math.cos(a), hy + ahead * math.sin(a))
 
     def odometry_speed(self, dt: float) -> float:
-        # stance-foot kinematics measure the body's motion over the ground, wrong by the step's slip
-        return self.true_speed * (1.0 + self.slip) + self.rng.normal(0.0, self.spec.leg_odo_noise)
+        # stance-foot kinematics measure the body's motion relative to the feet, wrong by the step's slip; a
+        # body held by a wall while the gait goes on slips its stance feet, and the legs still report the gait
+        return self.speed * (1.0 + self.slip) + self.rng.normal(0.0, self.spec.leg_odo_noise)
 
 
 def make_robot(kind: str, world: World, x: float, y: float, yaw: float, rng: np.random.Generator) -> Robot:

@@ -188,9 +188,9 @@ class Run:
     def _transmit(self, st: StationSim, src: str, dst: str, data: bytes, t: float) -> None:
         if st.state is None or self._jammed(st.name, t):
             return
-        latency = self.radio.packet(st.state)
-        if latency is not None:
-            self.bus.send(src, dst, data, t + latency)
+        at = self.radio.arrival(st.state, t, (src, dst))
+        if at is not None:
+            self.bus.send(src, dst, data, at)
 
     def _radio_status(self, t: float) -> None:
         """The operator's telemetry radio reports both ends' RSSI, as a SiK radio would."""
@@ -258,7 +258,8 @@ class Run:
             self._close_block()
             blk = None
         if returning and blk is None:
-            st = v.service
+            # the tick a block becomes current, the service still holds the previous block's state
+            st = v.service if v.service_index == cur.index else None
             target = st.route.target if st is not None and st.route is not None else None
             blk = BlockRecord(cur.index, t, (float(pos[0]), float(pos[1])), target,
                               st.max_displacement if st is not None else math.inf)
@@ -268,7 +269,7 @@ class Run:
                 a, b = tr.true[-2], tr.true[-1]
                 blk.distance += math.hypot(b[0] - a[0], b[1] - a[1])
             blk.max_disp = max(blk.max_disp, math.hypot(pos[0] - blk.start[0], pos[1] - blk.start[1]))
-            st = v.service
+            st = v.service if v.service_index == blk.index else None
             if st is not None and st.route is not None and st.route is not blk.route_obj:
                 blk.route_obj = st.route
                 blk.route = st.route.points if blk.route is None else np.vstack([blk.route, st.route.points])

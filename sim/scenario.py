@@ -37,7 +37,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-BUILTIN = ("tunnel", "warehouse", "loop", "open", "handover")
+BUILTIN = ("tunnel", "warehouse", "loop", "open", "handover", "building", "culvert")
 # scenario names for the mission items of a return plan
 PLAN_COMMANDS = {"RETURN_TO_LINK": NAV_RETURN_TO_LINK, "BOUNDARY": LEASE_BOUNDARY, "LOITER": NAV_LOITER_TIME,
                  "RETURN_TO_LAUNCH": NAV_RETURN_TO_LAUNCH, "WAYPOINT": NAV_WAYPOINT}
@@ -285,7 +285,9 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
     radio_kw = {}
     for fname in RadioParams.__dataclass_fields__:
         if fname in radio_raw:
-            radio_kw[fname] = r.number(radio_raw, fname, f"radio.{fname}")
+            flag = isinstance(getattr(RadioParams, fname), bool)  # an option (reorder), not a number
+            radio_kw[fname] = (r.get(radio_raw, fname, f"radio.{fname}", bool) if flag
+                               else r.number(radio_raw, fname, f"radio.{fname}"))
     start_raw = r.table(raw, "start", "start", ("position", "yaw_deg"))
     sx, sy = r.point(r.get(start_raw, "position", "start.position", list), "start.position")
     syaw = math.radians(r.number(start_raw, "yaw_deg", "start.yaw_deg", 0.0, -360, 360))

@@ -1,4 +1,5 @@
-"""Simulated sensors: position fixes, odometry and a drifting rate gyro. Seeded, so runs are deterministic."""
+"""Simulated sensors: position fixes, odometry, a drifting rate gyro and a forward accelerometer. Seeded, so runs are
+deterministic."""
 
 from __future__ import annotations
 
@@ -21,12 +22,18 @@ class SensorSpec:
     gyro_bias_walk: float = 0.0005  # rad/s per sqrt(s)
     heading_hz: float = 10.0  # absolute heading reference (visual/lidar odometry), works underground too
     heading_std: float = 0.03  # rad
+    accel_noise: float = 0.05  # m/s^2 per sample: forward accelerometer of the IMU
+    accel_bias0: float = 0.02  # m/s^2 initial bias std
 
 
 class Sensors:
     def __init__(self, robot: Robot, world: World, rng: np.random.Generator, spec: SensorSpec = SensorSpec()) -> None:
         self.robot, self.world, self.rng, self.spec = robot, world, rng, spec
         self.bias = rng.normal(0.0, spec.gyro_bias0)
+        # the IMU draws from its own stream (a jump ahead of the shared one, which it leaves where it was), so
+        # adding it did not change what the other sensors draw for a given seed
+        self.imu_rng = np.random.Generator(rng.bit_generator.jumped())
+        self.accel_bias = self.imu_rng.normal(0.0, spec.accel_bias0)
         self._next_fix = 0.0
         self._next_heading = 0.0
         self.fixes = 0
@@ -49,4 +56,5 @@ class Sensors:
         if t + 1e-9 >= self._next_heading:
             self._next_heading = t + 1.0 / s.heading_hz
             heading = self.robot.pose[2] + r.normal(0.0, s.heading_std)
-        return Readings(t, self.robot.odometry_speed(dt), float(gyro), fix, heading, s.heading_std)
+        accel = self.robot.accel + self.accel_bias + self.imu_rng.normal(0.0, s.accel_noise)
+        return Readings(t, self.robot.odometry_speed(dt), float(gyro), fix, heading, s.heading_std, float(accel))

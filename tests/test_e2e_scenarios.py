@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +34,30 @@ def _run_file(tmp_path, base: str, extra: str) -> tuple[Run, dict]:
     return r, r.metrics
 
 
+def _one_block_variant(tmp_path, base: str, seed: int, vehicle: str) -> tuple[Run, dict]:
+    """The scenario with its plan cut to one RETURN_TO_LINK block, so the return itself is all that runs."""
+    text = (Path(sim.__file__).parent / "scenarios" / f"{base}.toml").read_text()
+    text = re.sub(r"\nplan = \[.*?\n\]", '\nplan = [{ command = "RETURN_TO_LINK", max_displacement = 60.0 }]',
+                  text, flags=re.S)
+    path = tmp_path / f"{base}-one-block.toml"
+    path.write_text(text)
+    r = Run(load(str(path)), vehicle, seed).run()
+    r.metrics = metrics.compute(r)
+    return r, r.metrics
+
+
+@pytest.mark.parametrize("vehicle", ["rover", "legged"])
+def test_the_return_does_not_hit_the_adit_wall(tmp_path, vehicle):
+    """tunnel, seed 3, one return block: the follower used to swing a forward U-turn at the bend into the inner
+    corner. It backs out along its trail instead (the outbound drive touched no wall)."""
+    r, m = _one_block_variant(tmp_path, "tunnel", 3, vehicle)
+    assert len(r.blocks) >= 1 and r.blocks[0].distance > 1.0
+    assert m["collisions"] == 0
+    k0, k1 = (int(round(t / DT)) - 1 for t in (r.blocks[0].started, r.blocks[0].ended))
+    cmd = np.array(r.trace.cmd[k0:k1])
+    assert (cmd[:, 0] < 0).any()  # it backed up
+
+
 @pytest.mark.parametrize("vehicle", ["rover", "legged"])
 @pytest.mark.parametrize("name", BUILTIN)
 def test_scenario_meets_its_criteria(name, vehicle):
@@ -44,7 +69,7 @@ def test_scenario_meets_its_criteria(name, vehicle):
 
 
 @pytest.mark.parametrize("vehicle", ["rover", "legged"])
-@pytest.mark.parametrize("name", ["tunnel", "warehouse", "loop", "open"])
+@pytest.mark.parametrize("name", ["tunnel", "warehouse", "loop", "open", "building", "culvert"])
 def test_return_begins_within_one_tick_of_the_timeout(name, vehicle):
     r, m = run(name, vehicle)
     assert m["reaction_latency_s"] is not None
@@ -60,7 +85,7 @@ def test_return_begins_within_one_tick_of_the_timeout(name, vehicle):
 
 
 @pytest.mark.parametrize("vehicle", ["rover", "legged"])
-@pytest.mark.parametrize("name", ["tunnel", "warehouse", "loop", "open"])
+@pytest.mark.parametrize("name", ["tunnel", "warehouse", "loop", "open", "building", "culvert"])
 def test_stops_soon_after_the_link_is_back_and_inside_the_displacement_limit(name, vehicle):
     r, m = run(name, vehicle)
     params = r.vehicle.params
@@ -74,6 +99,22 @@ def test_stops_soon_after_the_link_is_back_and_inside_the_displacement_limit(nam
         path = np.array(r.trace.true[k0:k1 + 25])  # and the half second it takes to come to a stop
         past = float(np.hypot(*np.diff(path, axis=0).T).sum())
         assert past <= params["LNK_REGAIN_S"] * speed + params["RTL_ARRIVE_R"], f"drove {past:.2f} m past"
+
+
+@pytest.mark.parametrize("vehicle", ["rover", "legged"])
+@pytest.mark.parametrize("name, seed", [("building", 3), ("culvert", 3)])
+def test_the_return_scenarios_hold_for_another_seed(name, seed, vehicle):
+    """building and culvert stress the return (a doorway, two bends, a 5 m budget per lease): not one lucky seed."""
+    r, m = run(name, vehicle, seed)
+    assert m["passed"], m["failures"]
+    assert m["collisions"] == 0 and m["distance_back_m"] >= 1.0
+
+
+def test_culvert_needs_more_than_one_block_of_its_chain():
+    r, m = run("culvert", "rover")
+    assert len(r.blocks) >= 2 and r.blocks[0].reason == "COMPLETED"
+    assert r.blocks[0].max_disp <= 5.0 + metrics.DISPLACEMENT_SLACK
+    assert m["link_regained_s"] is not None and m["link_regained_s"] > r.blocks[1].started
 
 
 def test_handover_refuses_the_first_station_after_takeover():
@@ -121,3 +162,25 @@ def test_same_scenario_and_seed_give_identical_metrics():
     assert a == b
     c = metrics.compute(Run(load("loop"), "rover", 8).run())
     assert c["lease_events"] != a["lease_events"] or c["estimator_rmse_m"] != a["estimator_rmse_m"]
+
+
+@pytest.mark.parametrize("vehicle", ["rover", "legged"])
+def test_a_return_pressed_against_rock_ends_stuck_without_poisoning_the_estimate(tmp_path, vehicle):
+    """tunnel with a one-waypoint plan straight into the end of the drift: the robot reaches the rock and its
+    wheels spin (its feet slip). The block used to run on dead reckoning toward an estimated arrival; now the
+    odometry's disagreement with the accelerometer ends it STUCK within seconds, the estimate where the robot is."""
+    text = (Path(sim.__file__).parent / "scenarios" / "tunnel.toml").read_text()
+    text = re.sub(r"\nplan = \[.*?\n\]", '\nplan = [{ command = "WAYPOINT", x = 61.2, y = 21.2 }]', text, flags=re.S)
+    path = tmp_path / "tunnel-into-the-rock.toml"
+    path.write_text(text)
+    r = Run(load(str(path)), vehicle).run()
+    blk = r.blocks[0]
+    assert blk.reason == "STUCK"
+    k0, k1 = (int(round(t / DT)) - 1 for t in (blk.started, blk.ended))
+    true, est = np.array(r.trace.true[k0:k1 + 1]), np.array(r.trace.est[k0:k1 + 1])
+    steps = np.hypot(*np.diff(true, axis=0).T)
+    stopped = np.flatnonzero((np.cumsum(steps) > 2.0) & (steps < 0.05 * DT))
+    assert len(stopped) > 0 and r.world.collisions >= 1  # it drove up to the rock and stopped against it
+    held = (len(steps) - stopped[0]) * DT
+    assert held < 5.0  # not the 15 s of "no progress" it took before, nor an "arrival"
+    assert float(np.hypot(*(true[-1] - est[-1]))) < 1.5

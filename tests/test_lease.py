@@ -11,6 +11,7 @@ from vehicle.lease import (
     Holder,
     LeaseBook,
     LeaseConfig,
+    LeaseEvent,
     LeaseId,
     QueuedCommand,
     RejectReason,
@@ -253,3 +254,14 @@ def test_a_running_return_is_never_taken_over_and_a_silent_owner_after_it_is():
     assert out.book.owner == OTHER and out.events[0].reason is ExpireReason.ROOT_REPLACED
     assert book.owner == GCS  # and the owner could always have come back itself
     assert book.may_take(GCS, 4.0)
+
+
+def test_every_lease_statustext_fits_one_chunk():
+    """A lease event is announced in one STATUSTEXT (50 characters): a two-chunk text arrives in pieces."""
+    for epoch in (1, 65535):
+        for expired in (None, 0, 65534):
+            for current in (None, 0, 65534):
+                for reason in ExpireReason:
+                    for holder in Holder:
+                        text = LeaseEvent(0.0, epoch, expired, current, reason, holder).describe()
+                        assert len(text.encode()) <= 50, text

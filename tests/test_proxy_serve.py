@@ -76,3 +76,38 @@ def test_sim_serve_answers_and_leaves_a_plot(tmp_path):
     assert proc.returncode == 0, err
     assert "through the radio model" in err and "t=" in err
     assert (tmp_path / "trajectory.png").stat().st_size > 10_000
+
+
+class _Loopback:
+    """A transport stand-in: datagrams handed in by the test, datagrams sent kept in order."""
+
+    def __init__(self) -> None:
+        self.inbox: list[bytes] = []
+        self.sent: list[bytes] = []
+
+    def receive(self) -> list[tuple[bytes, tuple[str, int]]]:
+        got, self.inbox = self.inbox, []
+        return [(d, ("127.0.0.1", 0)) for d in got]
+
+    def send(self, data: bytes) -> None:
+        self.sent.append(data)
+
+
+def test_proxy_keeps_the_order_of_each_direction_under_jitter():
+    radio = Radio(RadioParams(shadowing_db=0.0, latency_ms=20.0, jitter_ms=15.0), lambda a, b: 0.0, seed=4)
+    port = _Loopback()
+    proxy = RadioProxy(port, radio, (0.0, 0.0), 20.0, lambda: (5.0, 0.0))  # type: ignore[arg-type]
+    up, t = [], 0.0
+    for k in range(300):
+        t = round(t + 0.005, 9)
+        proxy.update(t)
+        port.inbox.append(b"u%d" % k)
+        up += [data for data, _addr in proxy.from_ground(t)]
+        proxy.to_ground(b"d%d" % k, t)
+        proxy.flush(t)
+    up += [data for data, _addr in proxy.from_ground(t + 1.0)]
+    proxy.flush(t + 1.0)
+    down = [d for d in port.sent if d.startswith(b"d")]
+    for got in (up, down):
+        numbers = [int(d[1:]) for d in got]
+        assert len(numbers) > 250 and numbers == sorted(numbers)

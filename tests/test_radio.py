@@ -2,7 +2,16 @@
 
 from __future__ import annotations
 
+import math
+import re
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
 from link.radio import Radio, RadioParams, rssi_to_radio_status
+from link.transports import LockstepBus
 from sim import scenario
 
 
@@ -39,3 +48,89 @@ def test_packet_fates_are_seeded_and_lossy_where_weak():
     assert fates_a == fates_b
     assert 0 < a.lost < 500
     assert rssi_to_radio_status(-127) == 0 and rssi_to_radio_status(-60) == 127
+
+
+def _jittery(reorder: bool) -> RadioParams:
+    # jitter far larger than the gap between packets: drawn latencies alone would reorder most neighbours
+    return RadioParams(shadowing_db=0.0, latency_ms=20.0, jitter_ms=15.0, reorder=reorder)
+
+
+def test_each_direction_keeps_its_order_while_latency_varies():
+    radio = Radio(_jittery(False), lambda a, b: 0.0, seed=5)
+    state = radio.link((0, 0), 20.0, (10.0, 0.0))
+    up = [radio.arrival(state, 0.002 * k, ("gcs", "vehicle")) for k in range(300)]
+    down = [radio.arrival(state, 0.002 * k + 0.001, ("vehicle", "gcs")) for k in range(300)]
+    up = [a for a in up if a is not None]
+    down = [a for a in down if a is not None]
+    for got in (up, down):
+        assert len(got) > 250
+        assert got == sorted(got)
+        assert max(b - a for a, b in zip(got, got[1:], strict=False)) > 0.003  # latency still varies
+    # the directions are independent: a slow packet one way does not hold back the other way
+    assert min(down) < max(up)
+
+
+def test_reordering_is_a_radio_option_off_by_default():
+    assert RadioParams().reorder is False
+    radio = Radio(_jittery(True), lambda a, b: 0.0, seed=5)
+    state = radio.link((0, 0), 20.0, (10.0, 0.0))
+    got = [a for a in (radio.arrival(state, 0.002 * k, "up") for k in range(300)) if a is not None]
+    assert got != sorted(got)
+
+
+def test_two_chunk_statustext_arrives_head_first_through_the_bus():
+    """Over a jittery link the tail chunk used to overtake the head (MAVSDK and the CLI showed it tail first)."""
+    bus = LockstepBus()
+    radio = Radio(_jittery(False), lambda a, b: 0.0, seed=11)
+    state = radio.link((0, 0), 20.0, (10.0, 0.0))
+    sent = []
+    for k in range(200):
+        t = 0.02 * (k // 2)  # two frames in the same tick, as a two-chunk STATUSTEXT leaves
+        at = radio.arrival(state, t, ("vehicle", "gcs"))
+        if at is not None:
+            bus.send("vehicle", "gcs", bytes([k]), at)
+            sent.append(k)
+    got = []
+    for k in range(1, 200):
+        got += [d[0] for d, _ in bus.receive("gcs", 0.02 * k)]
+    assert got == sent
+
+
+def test_a_scenario_radio_table_expresses_the_subt_virtual_radio(tmp_path):
+    """DARPA SubT virtual radio: RSSI = 20 dBm - (40 dB + 10 * 2.5 * log10 d) + N(0, 10 dB), noise floor -90."""
+    text = (Path(scenario.__file__).parent / "scenarios" / "open.toml").read_text()
+    text = re.sub(r"\[radio\][^\[]*", "", text)
+    text = re.sub(r"power_dbm = [-\d.]+", "power_dbm = 20.0", text)
+    text += ("\n[radio]\nexponent = 2.5\nref_loss_db = 40.0\nshadowing_db = 10.0\nnoise_floor_dbm = -90.0\n"
+             "reorder = false\n")
+    path = tmp_path / "subt.toml"
+    path.write_text(text)
+    sc = scenario.load(str(path))
+    p = sc.radio
+    assert (p.exponent, p.ref_loss_db, p.shadowing_db, p.noise_floor_dbm, p.reorder) == (2.5, 40.0, 10.0, -90.0,
+                                                                                           False)
+    g = sc.stations[0]
+    assert g.power_dbm == 20.0
+    flat = Radio(replace(p, shadowing_db=0.0), lambda a, b: 0.0, seed=2)
+    for d in (1.0, 10.0, 50.0, 200.0):
+        st = flat.link((g.x, g.y), g.power_dbm, (g.x + d, g.y))
+        assert st.rssi_dbm == pytest.approx(20.0 - (40.0 + 25.0 * math.log10(d)), abs=1e-9)
+        assert st.noise_dbm == -90.0
+    # with the 10 dB spread: the same mean, a spread of about 10 dB over many places
+    radio = Radio(p, lambda a, b: 0.0, seed=2)
+    rng = np.random.default_rng(0)
+    dev = []
+    for x, y in rng.uniform(-500.0, 500.0, size=(4000, 2)):
+        d = max(1.0, math.hypot(x - g.x, y - g.y))
+        dev.append(radio.link((g.x, g.y), g.power_dbm, (x, y)).rssi_dbm - (20.0 - 40.0 - 25.0 * math.log10(d)))
+    assert abs(float(np.mean(dev))) < 1.0
+    assert 8.0 < float(np.std(dev)) < 12.0
+
+
+def test_a_radio_option_that_is_not_a_flag_is_refused(tmp_path):
+    text = (Path(scenario.__file__).parent / "scenarios" / "open.toml").read_text()
+    text = re.sub(r"\[radio\][^\[]*", "", text) + "\n[radio]\nreorder = 1\n"
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(scenario.ScenarioError, match="radio.reorder"):
+        scenario.load(str(path))

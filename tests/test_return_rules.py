@@ -73,7 +73,7 @@ def test_link_regained_one_regain_s_after_the_link_is_back(outage):
     """Rule 3: LINK_REGAINED fires LNK_REGAIN_S after the link is good again, however long the outage (the
     station's sequence numbers run on while its packets are lost)."""
     pair = acquired(Pair())
-    drive(pair, 1.0, 6.0)
+    drive(pair, 1.0, 12.0)  # a trail longer than the return can back up during the outage
     pair.gs.stop()
     pair.step(1.0)
     t0 = pair.t

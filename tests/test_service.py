@@ -36,7 +36,8 @@ def run_block(rig, block, params, link_lost=True, limit=600.0, watch=None):
     end = rig.t + limit
     while res.finished is None and rig.t < end:
         p = rig.estimator.pose
-        res = step(res.state, p.x, p.y, p.yaw, rig.t, rig.trail, params, lost(rig), 1.2)
+        res = step(res.state, p.x, p.y, p.yaw, rig.t, rig.trail, params, lost(rig), 1.2,
+                   slipping=rig.estimator.slipping)
         rig.step(res.speed, res.yaw_rate)
         q = rig.estimator.pose
         max_disp = max(max_disp, displacement(res.state, q.x, q.y))
@@ -139,15 +140,22 @@ def test_timeout_and_stuck():
 
 
 
-def test_stuck_against_a_wall():
-    # a waypoint straight through the end of the drift: the quadruped presses against the rock and its leg
-    # odometry sees no progress
-    # (a rover's wheels would spin and its odometry would believe it arrived: see the note on wheel slip)
-    s, rig = outbound(vehicle="legged")
+@pytest.mark.parametrize("vehicle", ["rover", "legged"])
+def test_stuck_against_a_wall(vehicle):
+    """A waypoint straight through the end of the drift: the robot presses against the rock. The rover's wheels
+    spin and the quadruped's feet slip, so odometry reports the commanded motion; the estimator sees it disagree
+    with the accelerometer, keeps the estimate where the robot is, and the block ends STUCK instead of arriving
+    at an estimated target the robot never reached."""
+    s, rig = outbound(vehicle=vehicle)
     params = Params()
     block = blocks_from_items([PlanItem(16, x=61.2, y=21.2)], params)[0]
     res, _ = run_block(rig, block, params, limit=120.0)
     assert res.finished is ExpireReason.STUCK
+    assert rig.world.collisions >= 1  # it did reach the rock
+    x, y, _ = rig.robot.pose
+    p = rig.estimator.pose
+    assert math.hypot(p.x - x, p.y - y) < 2.5  # the spinning did not carry the estimate off
+    assert math.hypot(p.x - 61.2, p.y - 21.2) > 2.0  # and it is not "there"
 
 
 def test_blocks_refuse_an_item_the_service_could_not_run():

@@ -30,6 +30,7 @@ from vehicle.lease import (
     Verdict,
     epoch_before,
 )
+from vehicle.navigation import TURN_IN_PLACE
 from vehicle.params import Params
 from vehicle.service import (
     NAV_LOITER_TIME,
@@ -324,7 +325,7 @@ class Vehicle:
         r = self.driver.read(t, max(dt, 1e-6))
         self.readings = r
         est = self.estimator
-        est.predict(r.speed, r.yaw_rate, t)
+        est.predict(r.speed, r.yaw_rate, t, r.accel)
         if r.heading is not None:
             est.heading(r.heading, r.heading_std)
         if r.fix is not None and est.fix(r.fix.x, r.fix.y, r.fix.std):
@@ -375,7 +376,7 @@ class Vehicle:
                 step = start_block(cur.block, x, y, t, self.trail, self.params, link_lost, self.outbound_speed)
             else:
                 step = step_block(self.service, x, y, yaw, t, self.trail, self.params, link_lost,
-                                  self.outbound_speed)
+                                  self.outbound_speed, slipping=self.estimator.slipping)
         except Exception as e:  # noqa: BLE001 - the return runs when nobody can restart the vehicle
             return self._service_fault(cur.index, e, t)
         if fresh:
@@ -426,13 +427,19 @@ class Vehicle:
 
 
 def velocity_to_command(vn: float, ve: float, yaw_rate: float | None, yaw: float) -> tuple[float, float]:
-    """A NED velocity target for a unicycle: turn toward the velocity, drive the part of it along the heading."""
+    """A NED velocity target for a unicycle: turn toward the velocity, drive the part of it along the heading.
+
+    Far off the heading it turns in place first, as the return's navigator does: driving the cosine share of a
+    velocity 60 degrees off swings a wide arc, and a robot left facing away from its way out (a return backs up)
+    would sweep a U-turn into the corridor wall."""
     speed = math.hypot(vn, ve)
     if speed < 1e-3:
         return 0.0, yaw_rate or 0.0
     err = (math.atan2(ve, vn) - yaw + math.pi) % (2 * math.pi) - math.pi
     turn = max(-MAX_TELEOP_YAW_RATE, min(MAX_TELEOP_YAW_RATE, 2.0 * err)) if yaw_rate is None else yaw_rate
-    return speed * max(0.0, math.cos(err)), turn
+    if abs(err) > TURN_IN_PLACE:
+        return 0.0, turn
+    return speed * math.cos(err), turn
 
 
 def run(vehicle: Vehicle, endpoint, receive: Callable[[float], list], send: Callable[[bytes, float], None],

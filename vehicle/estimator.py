@@ -4,6 +4,14 @@ State ``[x, y, yaw, gyro_bias]`` in the local frame (x north, y east, yaw clockw
 Odometry (wheel or leg) gives forward speed, the gyro gives yaw rate with a slowly drifting bias, and position fixes
 (GNSS, UWB, a total station...) arrive at a few hertz and drop out in denied zones. Through a dropout the filter
 dead-reckons and its covariance grows honestly, which is what the trail's crumbs record as their std-dev.
+
+Odometry can lie: wheels spinning against a wall, feet slipping, report motion the body does not make, and dead
+reckoning through a denied zone would carry the lie into the trail (and a return would "arrive" while standing
+still). Two checks catch it. An inertial speed, integrated from the forward accelerometer and leaning on the
+odometry only while the two agree, exposes sustained slip: while it lasts the filter predicts with the inertial speed
+and inflates its covariance, and ``slipping`` tells the return that it is making no real progress. And a run of
+position fixes all gated out as outliers means the estimate, not the fixes, has gone wrong: the covariance is
+inflated by the innovation and the fix is taken, instead of rejecting every fix from then on.
 """
 
 from __future__ import annotations
@@ -21,6 +29,12 @@ class EstimatorConfig:
     gyro_noise: float = 0.02  # rad/s per sqrt(s)
     bias_walk: float = 0.0005  # rad/s per sqrt(s): gyro bias random walk
     fix_gate: float = 5.0  # Mahalanobis-like gate (sigma): a fix further off is an outlier
+    fix_streak: int = 3  # this many outliers in a row: the estimate has diverged, not the fixes
+    slip_speed: float = 0.3  # m/s: odometry this far from the inertial speed is slipping
+    slip_after: float = 0.5  # s: ... when it lasts this long
+    inertial_tau: float = 2.0  # s: the inertial speed leans on agreeing odometry with this time constant
+    residual_tau: float = 0.2  # s: smoothing of odometry minus inertial speed (odometry noise is per sample)
+    accel_bias_tau: float = 20.0  # s^2: how slowly the accelerometer bias is learnt
 
 
 @dataclass(frozen=True)
@@ -61,17 +75,62 @@ class Estimator:
         self.fixes_used = 0
         self.fixes_rejected = 0
         self._pose: Pose | None = None
+        self.inertial_speed = 0.0
+        self.accel_bias = 0.0  # m/s^2, learnt while odometry and accelerometer agree
+        self.residual = 0.0  # odometry minus inertial speed, smoothed
+        self.slip_since: float | None = None  # when the current run of odometry-inertial disagreement began
+        self.slip_time = 0.0  # s of slip seen since start, for the record
+        self.outlier_streak = 0
+        self.divergences = 0  # times a run of rejected fixes showed the estimate had gone wrong
 
-    def predict(self, speed: float, yaw_rate: float, t: float) -> None:
+    @property
+    def slipping(self) -> bool:
+        """The odometry has disagreed with the accelerometer for ``slip_after`` seconds: no real progress."""
+        return self.slip_since is not None and self.t - self.slip_since >= self.config.slip_after
+
+    def _check_odometry(self, speed: float, accel: float, dt: float) -> float:
+        """Update the inertial speed; returns the odometry speed the filter may trust (the inertial speed while
+        slipping) and keeps ``slip_since``."""
+        c = self.config
+        if abs(speed) < 0.02:
+            self.inertial_speed = 0.0  # the wheels or legs stand still: so does the body (a zero-velocity update)
+        else:
+            self.inertial_speed += (accel - self.accel_bias) * dt
+        r = speed - self.inertial_speed
+        self.residual += (r - self.residual) * min(1.0, dt / c.residual_tau)
+        if abs(self.residual) < c.slip_speed:
+            # agreeing: lean on the odometry, and learn the accelerometer's bias from what the leaning corrects
+            self.inertial_speed += r * min(1.0, dt / c.inertial_tau)
+            self.accel_bias -= r * dt / c.accel_bias_tau
+            self.slip_since = None
+            return speed
+        if self.slip_since is None:
+            self.slip_since = self.t
+        self.slip_time += dt
+        # slipping wheels or feet drive the body slower than they turn, never faster nor the other way: this
+        # bounds how far the accelerometer's bias can carry the inertial speed through a long slip
+        self.inertial_speed = min(max(self.inertial_speed, min(0.0, speed)), max(0.0, speed))
+        return self.inertial_speed
+
+    def predict(self, speed: float, yaw_rate: float, t: float, accel: float | None = None) -> None:
         """Unicycle prediction over ``t - self.t``: x' = f(x, u), P' = F P F' + Q.
 
         F is the identity plus three terms, so F P F' is written out in scalars; at 50 Hz the generic 4x4 matrix
         path was the largest single cost of the vehicle tick. The filter object and its updates stay filterpy's.
+        With ``accel`` (forward, m/s^2) the odometry is checked against it first; while it slips, the inertial
+        speed drives the prediction and the speed noise grows by the disagreement, so the crumbs laid meanwhile
+        say how little is known instead of recording motion that did not happen.
         """
         dt = t - self.t
         if dt <= 0:
             return
         c = self.config
+        qv_extra = 0.0
+        if accel is not None:
+            trusted = self._check_odometry(speed, accel, dt)
+            if trusted != speed:
+                qv_extra = (speed - trusted) ** 2 * dt  # as uncertain as the wheels and the IMU disagree
+                speed = trusted
         f = self._f
         x, y, yaw, b = f.x[0, 0], f.x[1, 0], f.x[2, 0], f.x[3, 0]
         cs, sn = math.cos(yaw), math.sin(yaw)
@@ -83,7 +142,7 @@ class Estimator:
         r1 = (p10 + a12 * p20, p11 + a12 * p21, p12 + a12 * p22, p13 + a12 * p23)
         r2 = (p20 + a23 * p30, p21 + a23 * p31, p22 + a23 * p32, p23 + a23 * p33)
         r3 = (p30, p31, p32, p33)
-        qv, qw, qb = (c.speed_noise**2) * dt, (c.gyro_noise**2) * dt, (c.bias_walk**2) * dt
+        qv, qw, qb = (c.speed_noise**2) * dt + qv_extra, (c.gyro_noise**2) * dt, (c.bias_walk**2) * dt
         q = (qv * cs * cs, qv * cs * sn, qv * sn * sn)
         # columns: (F P) F' + Q
         rows = []
@@ -113,8 +172,15 @@ class Estimator:
         r = z - f.x[:2]
         m2 = float((r.T @ np.linalg.solve(S, r))[0, 0])
         if m2 > self.config.fix_gate**2:
-            self.fixes_rejected += 1
-            return False
+            self.outlier_streak += 1
+            if self.outlier_streak < self.config.fix_streak:
+                self.fixes_rejected += 1
+                return False
+            # every recent fix disagrees the same way: the dead reckoning drifted (odometry slipped) beyond what
+            # the covariance admits. Widen the position covariance to the disagreement and take the fix.
+            self.divergences += 1
+            f.P[:2, :2] = f.P[:2, :2] + r @ r.T
+        self.outlier_streak = 0
         f.update(z, _jac_pos, _h_pos, R=np.eye(2) * std * std)
         self._pose = None
         self.fixes_used += 1

@@ -29,6 +29,7 @@ class Readings:
     fix: Fix | None
     heading: float | None = None  # absolute heading (compass, lidar or visual odometry), rad
     heading_std: float = 0.05
+    accel: float | None = None  # forward acceleration from the IMU, m/s^2 (None: the robot has no accelerometer)
 
 
 class RobotDriver(Protocol):

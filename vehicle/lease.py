@@ -148,9 +148,15 @@ class LeaseEvent:
     holder: Holder
 
     def describe(self) -> str:
-        exp = "-" if self.expired is None else f"[{self.epoch},{self.expired}]"
-        cur = "-" if self.current is None else f"[{self.epoch},{self.current}]"
-        return f"lease {exp} -> {cur} {self.reason.name} ({self.holder.name})"
+        """The STATUSTEXT line: at most 50 characters for every epoch, index, reason and holder, so it travels in
+        one STATUSTEXT without chunks (a chunked text arrives in pieces, and a lost piece garbles it)."""
+        exp = "-" if self.expired is None else str(self.expired)
+        cur = "-" if self.current is None else str(self.current)
+        return f"lease {self.epoch}: {exp}->{cur} {self.reason.name} {_HOLDER_WORD[self.holder]}"
+
+
+# who holds the new current lease, in a word short enough for one STATUSTEXT
+_HOLDER_WORD = {Holder.NONE: "none", Holder.OPERATOR: "operator", Holder.RETURN_SERVICE: "return"}
 
 
 @dataclass(frozen=True)

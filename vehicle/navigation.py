@@ -3,6 +3,13 @@
 Pure pursuit with a speed-scaled lookahead, a monotone progress variable (so a route that passes near itself is
 never short-circuited) and a slow-down for sharp turns and for arrival. The robot model's own limits (acceleration,
 turn rate, stride) are applied by whoever drives the actuators; the follower only asks for what is sensible.
+
+A return starts where the robot stopped, facing away from home: its route lies behind it. Swinging round on a
+forward arc needs a turning circle the corridor it just drove may not have (a 5 m adit is narrower than a U-turn
+at walking pace), so when the route lies behind, the follower drives it in reverse (a rover backs up, a quadruped
+walks backward), retracing the swept path it came in by. The direction has hysteresis, so a route that runs
+sideways does not make it dither; and whenever the heading error is large it turns in place before it drives,
+never an arc with speed.
 """
 
 from __future__ import annotations
@@ -12,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+TURN_IN_PLACE = 0.6  # rad: heading error beyond which a robot turns before it drives (returns and teleop alike)
+
 
 @dataclass(frozen=True)
 class FollowerConfig:
@@ -19,7 +28,10 @@ class FollowerConfig:
     lookahead_gain: float = 0.6  # s: lookahead grows with speed
     max_yaw_rate: float = 1.5  # rad/s
     arrive_radius: float = 1.0  # RTL_ARRIVE_R
-    turn_in_place: float = 1.2  # rad: heading error beyond which the robot turns before it drives
+    turn_in_place: float = TURN_IN_PLACE
+    reverse_beyond: float = math.radians(100.0)  # the route lies behind: drive it backward
+    forward_within: float = math.radians(80.0)  # ... until it lies ahead again (hysteresis)
+    can_reverse: bool = True
 
 
 @dataclass(frozen=True)
@@ -29,6 +41,7 @@ class FollowCommand:
     progress: float  # arc length along the route already passed
     remaining: float  # arc length still to go
     arrived: bool
+    reverse: bool = False  # driving backward; pass it back in on the next step
 
 
 class Path:
@@ -71,24 +84,39 @@ class Path:
         return max(s_from, best_s)
 
 
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
 def follow(path: Path, x: float, y: float, yaw: float, progress: float, cruise: float,
-           cfg: FollowerConfig = FollowerConfig()) -> FollowCommand:
-    """One control step of pure pursuit along ``path`` at up to ``cruise`` m/s."""
+           cfg: FollowerConfig = FollowerConfig(), reverse: bool = False) -> FollowCommand:
+    """One control step of pure pursuit along ``path`` at up to ``cruise`` m/s.
+
+    ``reverse`` is the direction of the previous step (False for a fresh route); the answer says which way to
+    drive now. Backward, the robot pursues with its tail: the same geometry with the heading turned by pi, and a
+    negative speed."""
     lookahead = max(cfg.lookahead_min, cfg.lookahead_gain * cruise)
     progress = path.project(x, y, progress, window=2.0 * lookahead + 1.0)
     remaining = path.length - progress
     ex, ey = path.points[-1]
     dist_end = math.hypot(ex - x, ey - y)
     if dist_end <= cfg.arrive_radius and remaining <= cfg.arrive_radius + lookahead:
-        return FollowCommand(0.0, 0.0, progress, remaining, True)
+        return FollowCommand(0.0, 0.0, progress, remaining, True, reverse)
     tx, ty = path.at(progress + lookahead)
-    alpha = math.atan2(ty - y, tx - x) - yaw
-    alpha = (alpha + math.pi) % (2 * math.pi) - math.pi
+    bearing = math.atan2(ty - y, tx - x)
+    ahead = abs(_wrap(bearing - yaw))
+    if not cfg.can_reverse or reverse and ahead < cfg.forward_within:
+        reverse = False
+    elif not reverse and ahead > cfg.reverse_beyond:
+        reverse = True
+    alpha = _wrap(bearing - yaw - (math.pi if reverse else 0.0))
     Ld = max(1e-6, math.hypot(tx - x, ty - y))
     if abs(alpha) > cfg.turn_in_place:
-        return FollowCommand(0.0, math.copysign(cfg.max_yaw_rate, alpha), progress, remaining, False)
-    speed = cruise * max(0.25, math.cos(alpha))
+        # slow down the turn as the error closes, so it does not overshoot back past the threshold
+        turn = min(cfg.max_yaw_rate, 2.0 * abs(alpha))
+        return FollowCommand(0.0, math.copysign(turn, alpha), progress, remaining, False, reverse)
+    speed = cruise * math.cos(alpha)
     speed = min(speed, max(0.3, 0.8 * dist_end))  # ease into the end of the route
-    yaw_rate = 2.0 * speed * math.sin(alpha) / Ld
+    yaw_rate = 2.0 * speed * math.sin(alpha) / Ld  # the same sign backward: the tail leads
     yaw_rate = max(-cfg.max_yaw_rate, min(cfg.max_yaw_rate, yaw_rate))
-    return FollowCommand(speed, yaw_rate, progress, remaining, False)
+    return FollowCommand(-speed if reverse else speed, yaw_rate, progress, remaining, False, reverse)

@@ -102,6 +102,7 @@ class ServiceState:
     last_progress_at: float
     stretch_speed: bool = False  # RTL_SPEED=0: drive each stretch at the speed it was driven outbound
     onward: bool = False  # went on past a dead-zone target (DESIGN §6): the next arrival ends the block
+    reverse: bool = False  # the navigator is driving the route backward (it lay behind the robot)
 
 
 RETURN_SPEED_MIN, RETURN_SPEED_MAX = SPEED_RANGE  # m/s: within the robot's limits (MAX_TELEOP_SPEED)
@@ -199,12 +200,16 @@ def _bounded_from(route: Route, center: tuple[float, float], radius: float) -> R
 
 
 def step(st: ServiceState, x: float, y: float, yaw: float, t: float, trail: Trail, params: Params,
-         link_lost: bool, outbound_speed: float) -> ServiceStep:
-    """One control tick of the current block."""
+         link_lost: bool, outbound_speed: float, slipping: bool = False) -> ServiceStep:
+    """One control tick of the current block. ``slipping``: the estimator finds the odometry inconsistent (wheels
+    spinning against a wall), so the estimated progress is not real and the block ends STUCK rather than
+    "arriving" at a target it never reached."""
     it = st.items[st.item]
     max_time = params["RTL_MAX_TIME"]
     if max_time > 0 and t - st.started_at >= max_time:
         return ServiceStep(st, 0.0, 0.0, ExpireReason.TIMEOUT)
+    if slipping and it.command != NAV_LOITER_TIME:
+        return ServiceStep(st, 0.0, 0.0, ExpireReason.STUCK)
     if it.command == NAV_LOITER_TIME:
         if t - st.item_started_at >= it.param1:
             return _next_item(st, x, y, t, trail, params, link_lost, outbound_speed)
@@ -215,7 +220,7 @@ def step(st: ServiceState, x: float, y: float, yaw: float, t: float, trail: Trai
         # past a dead-zone target only for want of the link: it is back (a block that continues on regain)
         return ServiceStep(st, 0.0, 0.0, ExpireReason.COMPLETED)
     cfg = FollowerConfig(arrive_radius=params["RTL_ARRIVE_R"])
-    cmd = follow(st.path, x, y, yaw, st.progress, cruise(st), cfg)
+    cmd = follow(st.path, x, y, yaw, st.progress, cruise(st), cfg, st.reverse)
     if cmd.arrived:
         onward = _go_on(replace(st, progress=cmd.progress), x, y, t, params, link_lost)
         if onward is not None:
@@ -225,7 +230,7 @@ def step(st: ServiceState, x: float, y: float, yaw: float, t: float, trail: Trai
         st = replace(st, best_remaining=cmd.remaining, last_progress_at=t)
     elif t - st.last_progress_at >= STUCK_AFTER:
         return ServiceStep(st, 0.0, 0.0, ExpireReason.STUCK)
-    return ServiceStep(replace(st, progress=cmd.progress), cmd.speed, cmd.yaw_rate)
+    return ServiceStep(replace(st, progress=cmd.progress, reverse=cmd.reverse), cmd.speed, cmd.yaw_rate)
 
 
 def displacement(st: ServiceState, x: float, y: float) -> float:

@@ -1,0 +1,84 @@
+"""The estimator's odometry checks: wheels spinning against a wall and a diverged estimate do not poison the trail."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from sim.robots import make_robot
+from sim.sensors import Sensors
+from sim.world import Wall, World
+from vehicle.estimator import Estimator
+
+DT = 0.02
+EVERYWHERE = ((-100.0, -100.0), (100.0, -100.0), (100.0, 100.0), (-100.0, 100.0))
+
+
+def _press_into_a_wall(kind: str, seconds: float, use_accel: bool = True):
+    """Drive straight at a wall 3 m ahead, with no position fixes at all, and keep pushing."""
+    world = World((Wall(((4.0, -5.0), (4.0, 5.0)), 0.5, 30.0),), denied=(EVERYWHERE,))
+    rng = np.random.default_rng(2)
+    robot = make_robot(kind, world, 0.0, 0.0, 0.0, rng)
+    sensors = Sensors(robot, world, rng)
+    est = Estimator(0.0, 0.0, 0.0, 0.0, pos_std=0.1, yaw_std=0.02)
+    t, std_at_contact, slipping = 0.0, None, []
+    for _ in range(int(seconds / DT)):
+        robot.command(0.8, 0.0)
+        robot.before_step(DT)
+        world.step(DT)
+        robot.after_step(DT)
+        t = round(t + DT, 9)
+        r = sensors.read(t, DT)
+        est.predict(r.speed, r.yaw_rate, t, r.accel if use_accel else None)
+        if r.heading is not None:
+            est.heading(r.heading, r.heading_std)
+        if world.collisions and std_at_contact is None:
+            std_at_contact = est.pose.std
+        slipping.append(est.slipping)
+    return robot, est, std_at_contact, slipping
+
+
+@pytest.mark.parametrize("kind", ["rover", "legged"])
+def test_the_simulator_spins_wheels_and_slips_feet_against_a_wall(kind):
+    robot, est, _, _ = _press_into_a_wall(kind, 12.0, use_accel=False)
+    x, _, _ = robot.pose
+    assert robot.true_speed == pytest.approx(0.0, abs=0.02)  # the body is held by the rock
+    assert x < 4.0 - 0.25 - 0.3
+    # the odometry kept reporting the commanded motion: dead reckoning alone believes it went on
+    assert est.pose.x > x + 3.0
+
+
+@pytest.mark.parametrize("kind", ["rover", "legged"])
+def test_spinning_odometry_inflates_the_uncertainty_instead_of_moving_the_estimate(kind):
+    robot, est, std_at_contact, slipping = _press_into_a_wall(kind, 12.0)
+    x, y, _ = robot.pose
+    err = math.hypot(est.pose.x - x, est.pose.y - y)
+    assert err < 1.0 and err < 2.0 * est.pose.std  # about where it is, and it knows how well
+    assert est.slipping and sum(slipping) * DT > 5.0
+    assert not any(slipping[:int(2.0 / DT)])  # free driving and accelerating is not slip
+    assert std_at_contact is not None and est.pose.std > std_at_contact + 0.3
+
+
+def test_a_run_of_rejected_fixes_means_the_estimate_diverged_and_it_recovers():
+    est = Estimator(0.0, 0.0, 0.0, 0.0, pos_std=0.1)
+    t = 0.0
+    used = []
+    for _ in range(10):  # the robot truly stands 6 m north of where the estimate believes
+        t += 0.2
+        est.predict(0.0, 0.0, t)
+        used.append(est.fix(6.0, 0.0, 0.5))
+    assert used[:2] == [False, False]  # one or two far fixes are outliers
+    assert est.divergences == 1 and all(used[2:])  # a third in a row: it is the estimate that is wrong
+    assert est.pose.x == pytest.approx(6.0, abs=0.5)
+
+
+def test_a_single_outlier_is_still_rejected():
+    est = Estimator(0.0, 0.0, 0.0, 0.0, pos_std=0.1)
+    fates = []
+    for k, x in enumerate([0.1, 0.0, 8.0, -0.1, 0.0, 9.0, 0.1]):
+        est.predict(0.0, 0.0, 0.2 * (k + 1))
+        fates.append(est.fix(x, 0.0, 0.5))
+    assert fates == [True, True, False, True, True, False, True]
+    assert est.divergences == 0 and abs(est.pose.x) < 0.3
