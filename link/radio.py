@@ -4,11 +4,17 @@ Log-distance path loss, the attenuation of every wall on the line of sight (from
 spatially correlated log-normal shadowing, and a noise floor give an RSSI; a logistic curve around the receiver
 sensitivity turns RSSI into a per-packet delivery probability; latency has a base and a jitter. Both directions
 use the same geometry (a reciprocal channel) but draw their own packet fates. Seeded, so runs repeat exactly.
+
+Each random stream belongs to one subsystem, named, and is derived from the run's seed by that name
+(``subsystem_rng``): the packet fates of one direction of one station's link, the shadowing field, the sensors,
+the robot. A draw in one never shifts another, so two trials that differ only in what the vehicle does after a
+link loss see the same radio, sensors and physics until then (DESIGN §9, paired trials).
 """
 
 from __future__ import annotations
 
 import math
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -37,6 +43,17 @@ class LinkState:
     delivery: float  # probability a packet gets through
 
 
+def subsystem_seed(seed: int, name: str) -> np.random.SeedSequence:
+    """The seed sequence of subsystem ``name`` in a run seeded ``seed``: the run's entropy with the name as its
+    spawn key, so every subsystem gets an independent stream and adding one never moves the others."""
+    return np.random.SeedSequence(seed, spawn_key=(zlib.crc32(name.encode("utf-8")),))
+
+
+def subsystem_rng(seed: int, name: str) -> np.random.Generator:
+    """A generator of its own for subsystem ``name`` (``radio.shadowing``, ``sensors``, ``robot``, ...)."""
+    return np.random.default_rng(subsystem_seed(seed, name))
+
+
 def rssi_to_radio_status(rssi_dbm: float) -> int:
     """RADIO_STATUS rssi as SiK radios report it: 0..254 (dBm = value / 1.9 - 127), 255 = unknown."""
     return int(max(0, min(254, round((rssi_dbm + 127.0) * 1.9))))
@@ -47,8 +64,11 @@ class Radio:
                  seed: int) -> None:
         self.p = params
         self.attenuation = attenuation
-        self.rng = np.random.default_rng(seed)
         self.seed = seed
+        self.rng = subsystem_rng(seed, "radio.packets")  # the stream of callers that name none
+        self._streams: dict[str, np.random.Generator] = {}
+        # the shadowing field is a function of place, seeded once from its own stream
+        self._field_seed = int(subsystem_seed(seed, "radio.shadowing").generate_state(1)[0])
         self._cells: dict[tuple[int, int], float] = {}
         self._last: dict[tuple, tuple[tuple[float, float], LinkState]] = {}
         self.sent = 0
@@ -57,7 +77,7 @@ class Radio:
     def _cell(self, i: int, j: int) -> float:
         v = self._cells.get((i, j))
         if v is None:
-            v = float(np.random.default_rng([self.seed, i & 0xFFFFFFFF, j & 0xFFFFFFFF]).normal())
+            v = float(np.random.default_rng([self._field_seed, i & 0xFFFFFFFF, j & 0xFFFFFFFF]).normal())
             self._cells[(i, j)] = v
         return v
 
@@ -98,10 +118,19 @@ class Radio:
         delivery = 1.0 / (1.0 + math.exp(-snr_margin / max(1e-6, self.p.fade_width_db / 4.0)))
         return LinkState(rssi, self.p.noise_floor_dbm, delivery)
 
-    def packet(self, state: LinkState) -> float | None:
-        """The fate of one packet: its latency in seconds, or None if it is lost."""
+    def stream(self, name: str) -> np.random.Generator:
+        """The packet-fate stream of one link direction, e.g. ``uplink.gcs`` or ``downlink.gcs``."""
+        rng = self._streams.get(name)
+        if rng is None:
+            rng = self._streams[name] = subsystem_rng(self.seed, f"radio.{name}")
+        return rng
+
+    def packet(self, state: LinkState, stream: str | None = None) -> float | None:
+        """The fate of one packet: its latency in seconds, or None if it is lost. ``stream`` names the link
+        direction whose random stream decides it (see ``stream``); without one, a stream shared by all."""
+        rng = self.rng if stream is None else self.stream(stream)
         self.sent += 1
-        if self.rng.random() >= state.delivery:
+        if rng.random() >= state.delivery:
             self.lost += 1
             return None
-        return max(0.0, self.p.latency_ms + self.rng.normal(0.0, self.p.jitter_ms)) / 1000.0
+        return max(0.0, self.p.latency_ms + rng.normal(0.0, self.p.jitter_ms)) / 1000.0

@@ -1,4 +1,8 @@
-"""Simulated sensors: position fixes, odometry and a drifting rate gyro. Seeded, so runs are deterministic."""
+"""Simulated sensors: position fixes, odometry and a drifting rate gyro. Seeded, so runs are deterministic.
+
+The generator passed in is the sensors' own stream (``link.radio.subsystem_rng(seed, "sensors")`` in a run): draws
+here never shift the robot's or the radio's, and theirs never shift these.
+"""
 
 from __future__ import annotations
 
