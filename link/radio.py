@@ -6,14 +6,17 @@ sensitivity turns RSSI into a per-packet delivery probability; latency has a bas
 use the same geometry (a reciprocal channel) but draw their own packet fates. Seeded, so runs repeat exactly.
 
 Each random stream belongs to one subsystem, named, and is derived from the run's seed by that name
-(``subsystem_rng``): the packet fates of one direction of one station's link, the shadowing field, the sensors,
-the robot. A draw in one never shifts another, so two trials that differ only in what the vehicle does after a
-link loss see the same radio, sensors and physics until then (DESIGN §9, paired trials).
+(``subsystem_rng``): the packet fates of one direction of one station's link (keyed by send time and rank, so
+they do not depend on how many packets went before), the shadowing field, the sensors, the robot. A draw in one
+never shifts another, so two trials that differ only in what the vehicle does after a link loss see the same
+radio, sensors and physics until then (DESIGN §9, paired trials).
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
+import struct
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -66,7 +69,8 @@ class Radio:
         self.attenuation = attenuation
         self.seed = seed
         self.rng = subsystem_rng(seed, "radio.packets")  # the stream of callers that name none
-        self._streams: dict[str, np.random.Generator] = {}
+        self._streams: dict[str, bytes] = {}  # the fate key of each link direction
+        self._rank: dict[str, tuple[int, int]] = {}  # (time in µs, rank) of each direction's last packet
         # the shadowing field is a function of place, seeded once from its own stream
         self._field_seed = int(subsystem_seed(seed, "radio.shadowing").generate_state(1)[0])
         self._cells: dict[tuple[int, int], float] = {}
@@ -118,19 +122,39 @@ class Radio:
         delivery = 1.0 / (1.0 + math.exp(-snr_margin / max(1e-6, self.p.fade_width_db / 4.0)))
         return LinkState(rssi, self.p.noise_floor_dbm, delivery)
 
-    def stream(self, name: str) -> np.random.Generator:
-        """The packet-fate stream of one link direction, e.g. ``uplink.gcs`` or ``downlink.gcs``."""
-        rng = self._streams.get(name)
-        if rng is None:
-            rng = self._streams[name] = subsystem_rng(self.seed, f"radio.{name}")
-        return rng
+    def _fate_key(self, name: str) -> bytes:
+        key = self._streams.get(name)
+        if key is None:
+            words = subsystem_seed(self.seed, f"radio.{name}").generate_state(4)
+            key = self._streams[name] = words.tobytes()
+        return key
 
-    def packet(self, state: LinkState, stream: str | None = None) -> float | None:
-        """The fate of one packet: its latency in seconds, or None if it is lost. ``stream`` names the link
-        direction whose random stream decides it (see ``stream``); without one, a stream shared by all."""
-        rng = self.rng if stream is None else self.stream(stream)
+    def _uniforms(self, name: str, t: float) -> tuple[float, float, float]:
+        """Three uniforms in (0, 1) for the next packet of stream ``name`` sent at time ``t``: a hash of the
+        stream's key, the time (µs) and the packet's rank among that stream's packets at that time. A packet's
+        fate depends on nothing sent before it, so two runs that differ only in extra traffic (a longer return
+        plan, a baseline's telemetry after the loss) still see the same fates for the packets they share."""
+        us = int(round(t * 1e6))
+        last, rank = self._rank.get(name, (None, 0))
+        rank = rank + 1 if last == us else 0
+        self._rank[name] = (us, rank)
+        h = hashlib.blake2b(struct.pack("<qI", us, rank), digest_size=24, key=self._fate_key(name)).digest()
+        a, b, c = struct.unpack("<QQQ", h)
+        return (a + 0.5) / 2.0**64, (b + 0.5) / 2.0**64, (c + 0.5) / 2.0**64
+
+    def packet(self, state: LinkState, stream: str | None = None, t: float | None = None) -> float | None:
+        """The fate of one packet: its latency in seconds, or None if it is lost.
+
+        With ``stream`` (a link direction such as ``uplink.gcs``) and the send time ``t``, the fate is drawn
+        from that direction's own key (see ``_uniforms``); without them, from one sequential stream shared by
+        every caller (the real-time proxy, which has no lockstep time)."""
         self.sent += 1
-        if rng.random() >= state.delivery:
+        if stream is None or t is None:
+            u, jitter = self.rng.random(), self.rng.normal()
+        else:
+            u, u1, u2 = self._uniforms(stream, t)
+            jitter = math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)  # Box-Muller
+        if u >= state.delivery:
             self.lost += 1
             return None
-        return max(0.0, self.p.latency_ms + rng.normal(0.0, self.p.jitter_ms)) / 1000.0
+        return max(0.0, self.p.latency_ms + self.p.jitter_ms * jitter) / 1000.0

@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from sim.runner import Run
-from vehicle.app import DT, State
+from vehicle.app import DT, GOOD_LINK_QUALITY, State
 
 KEYS = ("scenario", "vehicle", "seed", "sim_duration_s", "link_lost_s", "return_started_s", "reaction_latency_s",
         "link_regained_s", "distance_back_m", "max_displacement_m", "final_target_error_m", "collisions",
@@ -134,9 +134,12 @@ def after_loss(run: Run) -> dict:
       operator drove it again (a claimed operator lease), or at the end of the run.
     - ``rest_link_quality``: the owner's packet delivery probability there.
     - ``link_cycles``: number of COMMS_LOST events.
-    - ``regained_by``: "return" when the contact that regained the vehicle its owner's link began while a service
-      block held the lease or where the chain left the robot; "operator" when it began only after an operator
-      claim had moved the robot more than REGAIN_MOVED_M from there; None if never.
+    - ``regained_by`` (None if the vehicle never regained its owner's link after the loss): "return" when the
+      contact that regained it began while a service block held the lease, or the link was good where the chain
+      left the robot (delivery at rest >= GOOD_LINK_QUALITY: the vehicle's own link estimate may take a moment
+      to believe it, while the operator already claims and drives), or began before anyone moved the robot
+      more than REGAIN_MOVED_M from there; "operator" when it began only after an operator claim had moved the
+      robot out of a place where the link was still poor.
     - ``collisions_during_return``: collisions while a service block held the lease.
     - ``return_speed_mps``: distance driven under service blocks over the time they commanded motion.
     - ``blocks``: one record per service block (true frame).
@@ -156,7 +159,7 @@ def after_loss(run: Run) -> dict:
         back = next(((t, since) for t, since in run.link_backs if t >= t_loss - 1e-9), None)
         if back is not None:
             since = back[1] if back[1] is not None else back[0]
-            if end_t is None or since <= end_t + 1e-9:
+            if end_t is None or since <= end_t + 1e-9 or quality >= GOOD_LINK_QUALITY:
                 regained_by = "return"
             else:
                 k_back = min(len(tr.t) - 1, max(0, int(round(since / DT)) - 1))

@@ -202,7 +202,7 @@ class Run:
         if st.state is None or self._jammed(st.name, t):
             return
         direction = "downlink" if src == "vehicle" else "uplink"
-        latency = self.radio.packet(st.state, f"{direction}.{st.name}")
+        latency = self.radio.packet(st.state, f"{direction}.{st.name}", t)
         if latency is not None:
             self.bus.send(src, dst, data, t + latency)
 
@@ -299,6 +299,8 @@ class Run:
         if isinstance(c, Baseline):
             if c.route is not None and c.route is not blk.route_obj:
                 blk.route_obj, blk.route, blk.target = c.route, c.route, c.target
+                # every baseline heads for home, where the estimator started: the true start of the run
+                blk.target_true = self.trace.true[0] if c.target is not None and self.trace.true else None
             return
         st = v.service
         if st is None or v.service_index != blk.index:
