@@ -5,6 +5,7 @@ identical until the link is lost."""
 from __future__ import annotations
 
 import functools
+import json
 import math
 from pathlib import Path
 
@@ -226,3 +227,17 @@ def test_a_criterion_can_require_who_regained_the_link(tmp_path):
     r = Run(load(str(path)), "rover", duration=TUNNEL_S, policy="hold").run()
     m = metrics.compute(r)
     assert "link regained by None, expected by return" in m["failures"]
+
+
+def test_sim_run_flies_the_policy_named_on_the_command_line(tmp_path, capsys):
+    from sim.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["sim", "run", "tunnel", "--policy", "bogus"])
+    assert e.value.code == 2 and "invalid choice: 'bogus'" in capsys.readouterr().err
+    out = tmp_path / "hold"
+    code = main(["sim", "run", "handover", "--policy", "hold", "--out", str(out), "--quiet"])
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["policy"] == "hold" and [b["command"] for b in m["blocks"]] == ["HOLD"]
+    assert code == (0 if m["passed"] else 1)
+    assert "--policy hold" in capsys.readouterr().out
