@@ -30,7 +30,7 @@ from link.radio import LinkState, Radio
 from link.transports import LockstepBus
 from sim.driver import simulated_vehicle
 from sim.operator import Operator
-from sim.policies import check_policy, make_policy
+from sim.policies import DEFAULT_POLICY, check_policy, make_policy
 from sim.policies.base import Baseline
 from sim.scenario import PLAN_COMMANDS, Scenario
 from vehicle.app import DT
@@ -94,7 +94,7 @@ class BlockRecord:
 
 class Run:
     def __init__(self, scenario: Scenario, vehicle: str | None = None, seed: int | None = None,
-                 progress: bool = False, duration: float | None = None, policy: str = "returnlink") -> None:
+                 progress: bool = False, duration: float | None = None, policy: str = DEFAULT_POLICY) -> None:
         self.scenario = sc = scenario
         self.policy = check_policy(policy)
         self.kind = vehicle or sc.vehicle
@@ -287,7 +287,7 @@ class Run:
 
     def _command_of(self, lease) -> str:
         """The block's mission items by name (RETURN_TO_LINK, ...), or the baseline policy that drives it."""
-        if self.policy != "returnlink":
+        if self.policy != DEFAULT_POLICY:
             return self.policy.upper()
         items = lease.block.payload if lease.block is not None else ()
         return "+".join(COMMAND_NAMES.get(it.command, str(it.command)) for it in items)
