@@ -4,6 +4,7 @@ identical until the link is lost."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import math
@@ -13,8 +14,9 @@ import numpy as np
 import pytest
 
 import sim
-from link.radio import LinkState, Radio, RadioParams
+from link.radio import LinkState, Radio, RadioParams, subsystem_rng
 from sim import metrics
+from sim.driver import SimDriver
 from sim.policies import POLICY_NAMES, check_policy, make_policy
 from sim.policies.smartrtl import FS_TIMEOUT, SmartRTL, SmartRTLPath
 from sim.runner import Run
@@ -89,6 +91,29 @@ def test_a_packets_fate_does_not_depend_on_traffic_before_it_or_the_other_direct
         fates_busy.append(busy.packet(state, "uplink.gcs", t))
     assert fates_quiet == fates_busy
     assert 0 < sum(f is None for f in fates_quiet) < len(ticks)  # a real mix of lost and delivered packets
+
+
+def test_a_parameter_of_the_return_changes_nothing_before_the_loss():
+    """A campaign's parameter grid pairs like its policies: RTL_SPEED and LNK_REGAIN_S act only after the loss."""
+    sc = load("tunnel")
+    a, ma = flown("returnlink")
+    b = Run(dataclasses.replace(sc, params={**sc.params, "RTL_SPEED": 0.5, "LNK_REGAIN_S": 2.0}), "rover",
+            duration=TUNNEL_S).run()
+    mb = metrics.compute(b)
+    k = _k(_comms_lost(a))
+    assert a.trace.true[:k + 1] == b.trace.true[:k + 1]
+    assert ma["loss_position"] == mb["loss_position"]
+    assert mb["return_speed_mps"] < ma["return_speed_mps"]
+
+
+def test_the_sensors_draw_from_their_own_stream_whatever_the_robot_draws():
+    sc = load("open")
+    quiet = SimDriver(sc, "legged", subsystem_rng(5, "robot"), subsystem_rng(5, "sensors"))
+    busy = SimDriver(sc, "legged", subsystem_rng(5, "robot"), subsystem_rng(5, "sensors"))
+    busy.robot.rng.normal(size=17)  # a different gait history: more foot-slip draws
+    reads = [[d.read(k * DT, DT) for k in range(1, 200)] for d in (quiet, busy)]
+    fixes = [[r.fix for r in rs if r.fix is not None] for rs in reads]
+    assert fixes[0] and fixes[0] == fixes[1]
 
 
 # ----- each baseline's documented behaviour -----------------------------------------------------------------------
