@@ -164,6 +164,15 @@ def test_smartrtl_acts_fs_timeout_after_the_gcs_timeout_and_keeps_going_when_the
     assert m["regained_by"] == "return"
 
 
+def test_smartrtl_switched_on_by_the_operator_acts_at_once(tmp_path):
+    path = _variant(tmp_path, "tunnel", ("[criteria]", '[[events]]\nt = 20.0\naction = "rtl"\n\n[criteria]'))
+    r = Run(load(str(path)), "rover", duration=40.0, policy="smartrtl").run()
+    expired = next(e for e in r.vehicle.event_log if e.reason.name == "OPERATOR_EXPIRE")
+    assert 20.0 <= expired.t < 20.5
+    assert r.vehicle.contingency.acted == [pytest.approx(expired.t, abs=DT + 1e-9)]  # no failsafe delay
+    assert math.dist(r.blocks[0].route[-1], r.scenario.start[:2]) < 1.0
+
+
 def test_smartrtl_path_deactivates_when_full_for_its_timeout():
     path = SmartRTLPath(max_points=20, timeout=15.0)
     t, last_added = 0.0, 0.0

@@ -10,7 +10,8 @@ flight.
 The failsafe (``SmartRTL``): Rover's GCS failsafe triggers FS_GCS_TIMEOUT after the last GCS heartbeat and acts
 after FS_TIMEOUT (1.5 s) more; a real Rover SITL switched to SMART_RTL 4.55 s after its last heartbeat with
 FS_GCS_TIMEOUT 3. FS_GCS_TIMEOUT is this vehicle's LNK_TIMEOUT, so the robot stands still from COMMS_LOST until
-then (a heartbeat in that time clears the failsafe and the block ends). It then runs a thorough cleanup and
+then (a heartbeat in that time clears the failsafe and the block ends); an operator's RTL switches to it at
+once. It then runs a thorough cleanup and
 retraces the path newest point first to home, at the return speed returnlink would use, and does not stop when
 the link comes back (it stays in SMART_RTL until home). With SmartRTL deactivated, FS_ACTION 3 ("SmartRTL or
 RTL") falls back to RTL: a straight line home. Points are not recorded while the return runs; after a return the
@@ -154,9 +155,12 @@ class SmartRTL(Baseline):
         self.path.update(p.x, p.y, t)
 
     def begin(self, vehicle: Vehicle, t: float, x: float, y: float) -> None:
-        """The lease is the service's, but SMART_RTL takes over only when the failsafe acts (``_act``)."""
+        """After a link loss SMART_RTL takes over only when the failsafe acts (``_act``); an operator's RTL (the
+        mode switched by hand) takes over at once."""
         self.driver = None
         self.returning = True
+        if not vehicle.book.link.lost:
+            self._act(vehicle, t, x, y)
 
     def tick(self, vehicle: Vehicle, t: float, x: float, y: float, yaw: float) -> Command:
         if self.driver is None:
