@@ -6,7 +6,8 @@ displacement bound, and stops the moment the link is good again. Here the path i
 trail (estimate frame) reversed point by point, loops included, from the current position back to the trail's
 start; the robot stands still while the vehicle's link tag says the owner is heard well (``link_is_good``) and
 backs up again if it goes bad before the lease book declares LINK_REGAINED, which ends the block as for any
-return. It completes at the trail's start.
+return. It completes at the trail's start. An operator's RTL over a good link has no link to wait for: it backs
+up the whole trail, as any operator-commanded return runs to its target (DESIGN §6).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ class Backup(Baseline):
         super().__init__()
         self.driver: PathDriver | None = None
         self.stopped_on_link = 0  # ticks it stood still because the link was good
+        self.after_loss = True  # False: an operator's RTL over a good link, which backs up the whole trail
 
     def begin(self, vehicle: Vehicle, t: float, x: float, y: float) -> None:
         super().begin(vehicle, t, x, y)
@@ -31,10 +33,11 @@ class Backup(Baseline):
         self.route = np.vstack([[[x, y]], trail[::-1]]) if len(trail) else np.array([[x, y]])
         self.target = (float(self.route[-1, 0]), float(self.route[-1, 1]))
         self.driver = PathDriver(self.route, return_speed(vehicle), t)
+        self.after_loss = vehicle.book.link.lost
 
     def tick(self, vehicle: Vehicle, t: float, x: float, y: float, yaw: float) -> Command:
         assert self.driver is not None
-        if vehicle.link_is_good:
+        if self.after_loss and vehicle.link_is_good:
             self.stopped_on_link += 1
             self.driver.last_progress_at = t  # standing still on purpose is not being stuck
             return 0.0, 0.0, None
