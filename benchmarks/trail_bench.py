@@ -6,16 +6,13 @@ Aim (issue): at 0.25 m tolerance, 10 km in at most 2000 points, under 20 us per 
 from __future__ import annotations
 
 import math
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from baselines.smartrtl import SmartRTLBaseline  # noqa: E402
-
-from vehicle.trail import Crumb, Trail, TrailConfig  # noqa: E402
+from sim.policies.smartrtl import SmartRTLPath
+from vehicle.trail import Crumb, Trail, TrailConfig
 
 
 def route(length_m: float = 10_000.0, speed: float = 1.5, hz: float = 50.0, seed: int = 7,
@@ -63,7 +60,7 @@ def compare(name: str, xy: np.ndarray) -> None:
     dt = 1.0 / 50.0
     cfg = TrailConfig(spacing=0.5, tolerance=0.25, loop_distance=1.0, max_points=2000)
     trail = Trail(cfg)
-    base = SmartRTLBaseline()
+    base = SmartRTLPath()
     ours_at_off = None
     crumbs = [Crumb(float(x), float(y), k * dt) for k, (x, y) in enumerate(xy)]
     t0 = time.perf_counter()

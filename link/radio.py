@@ -11,11 +11,20 @@ transfer never arrives tail first. ``reorder`` lets a scenario ask for a network
 
 The parameters can express the DARPA SubT virtual radio (log-distance exponent 2.5, 40 dB at 1 m, 10 dB log-normal
 spread, -90 dBm noise floor; its 20 dBm transmit power is the station's ``power_dbm``).
+
+Each random stream belongs to one subsystem, named, and is derived from the run's seed by that name
+(``subsystem_rng``): the packet fates of one direction of one station's link (keyed by send time and rank, so
+they do not depend on how many packets went before), the shadowing field, the sensors, the robot. A draw in one
+never shifts another, so two trials that differ only in what the vehicle does after a link loss see the same
+radio, sensors and physics until then (DESIGN §9, paired trials).
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
+import struct
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -45,6 +54,17 @@ class LinkState:
     delivery: float  # probability a packet gets through
 
 
+def subsystem_seed(seed: int, name: str) -> np.random.SeedSequence:
+    """The seed sequence of subsystem ``name`` in a run seeded ``seed``: the run's entropy with the name as its
+    spawn key, so every subsystem gets an independent stream and adding one never moves the others."""
+    return np.random.SeedSequence(seed, spawn_key=(zlib.crc32(name.encode("utf-8")),))
+
+
+def subsystem_rng(seed: int, name: str) -> np.random.Generator:
+    """A generator of its own for subsystem ``name`` (``radio.shadowing``, ``sensors``, ``robot``, ...)."""
+    return np.random.default_rng(subsystem_seed(seed, name))
+
+
 def rssi_to_radio_status(rssi_dbm: float) -> int:
     """RADIO_STATUS rssi as SiK radios report it: 0..254 (dBm = value / 1.9 - 127), 255 = unknown."""
     return int(max(0, min(254, round((rssi_dbm + 127.0) * 1.9))))
@@ -55,8 +75,12 @@ class Radio:
                  seed: int) -> None:
         self.p = params
         self.attenuation = attenuation
-        self.rng = np.random.default_rng(seed)
         self.seed = seed
+        self.rng = subsystem_rng(seed, "radio.packets")  # the stream of callers that name none
+        self._streams: dict[str, bytes] = {}  # the fate key of each link direction
+        self._rank: dict[str, tuple[int, int]] = {}  # (time in µs, rank) of each direction's last packet
+        # the shadowing field is a function of place, seeded once from its own stream
+        self._field_seed = int(subsystem_seed(seed, "radio.shadowing").generate_state(1)[0])
         self._cells: dict[tuple[int, int], float] = {}
         self._last: dict[tuple, tuple[tuple[float, float], LinkState]] = {}
         self._lane_last: dict[object, float] = {}  # per direction: when its last packet arrives
@@ -66,7 +90,7 @@ class Radio:
     def _cell(self, i: int, j: int) -> float:
         v = self._cells.get((i, j))
         if v is None:
-            v = float(np.random.default_rng([self.seed, i & 0xFFFFFFFF, j & 0xFFFFFFFF]).normal())
+            v = float(np.random.default_rng([self._field_seed, i & 0xFFFFFFFF, j & 0xFFFFFFFF]).normal())
             self._cells[(i, j)] = v
         return v
 
@@ -107,19 +131,49 @@ class Radio:
         delivery = 1.0 / (1.0 + math.exp(-snr_margin / max(1e-6, self.p.fade_width_db / 4.0)))
         return LinkState(rssi, self.p.noise_floor_dbm, delivery)
 
-    def packet(self, state: LinkState) -> float | None:
-        """The fate of one packet: its latency in seconds, or None if it is lost."""
+    def _fate_key(self, name: str) -> bytes:
+        key = self._streams.get(name)
+        if key is None:
+            words = subsystem_seed(self.seed, f"radio.{name}").generate_state(4)
+            key = self._streams[name] = words.tobytes()
+        return key
+
+    def _uniforms(self, name: str, t: float) -> tuple[float, float, float]:
+        """Three uniforms in (0, 1) for the next packet of stream ``name`` sent at time ``t``: a hash of the
+        stream's key, the time (µs) and the packet's rank among that stream's packets at that time. A packet's
+        fate depends on nothing sent before it, so two runs that differ only in extra traffic (a longer return
+        plan, a baseline's telemetry after the loss) still see the same fates for the packets they share."""
+        us = int(round(t * 1e6))
+        last, rank = self._rank.get(name, (None, 0))
+        rank = rank + 1 if last == us else 0
+        self._rank[name] = (us, rank)
+        h = hashlib.blake2b(struct.pack("<qI", us, rank), digest_size=24, key=self._fate_key(name)).digest()
+        a, b, c = struct.unpack("<QQQ", h)
+        return (a + 0.5) / 2.0**64, (b + 0.5) / 2.0**64, (c + 0.5) / 2.0**64
+
+    def packet(self, state: LinkState, stream: str | None = None, t: float | None = None) -> float | None:
+        """The fate of one packet: its latency in seconds, or None if it is lost.
+
+        With ``stream`` (a link direction such as ``uplink.gcs``) and the send time ``t``, the fate is drawn
+        from that direction's own key (see ``_uniforms``); without them, from one sequential stream shared by
+        every caller (the real-time proxy, which has no lockstep time)."""
         self.sent += 1
-        if self.rng.random() >= state.delivery:
+        if stream is None or t is None:
+            u, jitter = self.rng.random(), self.rng.normal()
+        else:
+            u, u1, u2 = self._uniforms(stream, t)
+            jitter = math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)  # Box-Muller
+        if u >= state.delivery:
             self.lost += 1
             return None
-        return max(0.0, self.p.latency_ms + self.rng.normal(0.0, self.p.jitter_ms)) / 1000.0
+        return max(0.0, self.p.latency_ms + self.p.jitter_ms * jitter) / 1000.0
 
-    def arrival(self, state: LinkState, t: float, lane: object) -> float | None:
-        """When a packet sent at ``t`` one way (``lane``, e.g. (source, destination)) arrives, or None if lost.
+    def arrival(self, state: LinkState, t: float, lane: object, stream: str | None = None) -> float | None:
+        """When a packet sent at ``t`` one way (``lane``, e.g. (source, destination)) arrives, or None if lost;
+        ``stream`` names the direction's own random stream (see ``packet``).
 
         Unless ``reorder`` is set, it never arrives before the packet sent before it in the same lane."""
-        latency = self.packet(state)
+        latency = self.packet(state, stream, t if stream is not None else None)
         if latency is None:
             return None
         at = t + latency

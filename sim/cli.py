@@ -82,9 +82,9 @@ def _cmd_sim_run(args: argparse.Namespace) -> int:
     seed = sc.seed if args.seed is None else args.seed
     out = Path(args.out) if args.out else Path("out") / f"{sc.name}-{kind}-{seed}"
     _writable_dir(out)
-    print(f"returnlink: running {sc.name} with the {kind} (seed {seed}), {sc.duration:g} simulated s",
-          file=sys.stderr)
-    run = Run(sc, kind, seed, progress=not args.quiet).run()
+    print(f"returnlink: running {sc.name} with the {kind} (seed {seed}, policy {args.policy}), "
+          f"{sc.duration:g} simulated s", file=sys.stderr)
+    run = Run(sc, kind, seed, progress=not args.quiet, policy=args.policy).run()
     m = run.metrics = metrics.compute(run)
     try:
         paths = [write_metrics(m, out / "metrics.json"), write_tlog(run, out / "run.tlog"),
@@ -189,6 +189,8 @@ def _cmd_keys(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from sim.policies import DEFAULT_POLICY, POLICY_NAMES
+
     p = argparse.ArgumentParser(
         prog="returnlink", description="Lease-based automated return to link for MAVLink robots.")
     sub = p.add_subparsers(dest="command", required=True)
@@ -204,6 +206,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--vehicle", choices=["rover", "legged"], help="robot model (default: the scenario's)")
     run.add_argument("--out", help="output directory (default: out/SCENARIO-VEHICLE-SEED)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument("--policy", choices=POLICY_NAMES, default=DEFAULT_POLICY,
+                     help="what the vehicle does when its link is lost: the scenario's plan (returnlink) or a "
+                          "baseline (DESIGN §9)")
     run.set_defaults(func=_cmd_sim_run)
     serve = sim.add_parser("serve", help="run a scenario in real time over UDP for MAVSDK, MAVProxy, QGC")
     serve.add_argument("scenario", help="a built-in scenario name or a .toml file")

@@ -10,11 +10,12 @@ from pathlib import Path
 
 import numpy as np
 
+from link.radio import subsystem_rng
 from sim.robots import Robot, make_robot
 from sim.scenario import Scenario
 from sim.sensors import Sensors
 from sim.world import World
-from vehicle.app import Vehicle
+from vehicle.app import Contingency, Vehicle
 from vehicle.io import Readings
 from vehicle.mavlink import Endpoint
 from vehicle.params import load_defaults
@@ -22,11 +23,15 @@ from vehicle.storage import remove_leftovers
 
 
 class SimDriver:
-    def __init__(self, scenario: Scenario, vehicle: str, rng: np.random.Generator) -> None:
+    """``rng`` drives the robot's physics noise (wheel scale, slip); ``sensor_rng``, when given, the sensors' own
+    noise, so what the robot does cannot shift what its sensors read (the runner passes both, by subsystem)."""
+
+    def __init__(self, scenario: Scenario, vehicle: str, rng: np.random.Generator,
+                 sensor_rng: np.random.Generator | None = None) -> None:
         self.world: World = scenario.world()
         x, y, yaw = scenario.start
         self.robot: Robot = make_robot(vehicle, self.world, x, y, yaw, rng)
-        self.sensors = Sensors(self.robot, self.world, rng)
+        self.sensors = Sensors(self.robot, self.world, rng if sensor_rng is None else sensor_rng)
         self.mav_type = self.robot.mav_type
 
     def command(self, speed: float, yaw_rate: float) -> None:
@@ -47,15 +52,18 @@ class SimDriver:
 
 
 def simulated_vehicle(scenario: Scenario, kind: str, seed: int, param_file: Path | None = None,
-                      boot_epoch: int | None = None, **endpoint_options) -> tuple[SimDriver, Vehicle, Endpoint]:
+                      boot_epoch: int | None = None, contingency: Contingency | None = None,
+                      **endpoint_options) -> tuple[SimDriver, Vehicle, Endpoint]:
     """The scenario's robot with the real onboard software on it: boot parameters from ``param_file`` (or the
     defaults; StoredFileError if it is damaged), then the scenario's own, as `sim run` and `sim serve` both start
-    it. ``boot_epoch`` None (`sim run`) derives the first epoch from ``seed``; `sim serve` draws one."""
-    driver = SimDriver(scenario, kind, np.random.default_rng(seed))
+    it. ``boot_epoch`` None (`sim run`) derives the first epoch from ``seed``; `sim serve` draws one. The robot
+    and its sensors draw from their own streams of ``seed`` (``link.radio.subsystem_rng``). ``contingency`` is a
+    baseline link-loss behaviour to fly instead of the return plan (``sim.policies``)."""
+    driver = SimDriver(scenario, kind, subsystem_rng(seed, "robot"), subsystem_rng(seed, "sensors"))
     if param_file is not None:
         remove_leftovers(param_file)
     params = load_defaults(param_file) if param_file is not None and param_file.is_file() else load_defaults()
     for k, v in scenario.params.items():
         params.set(k, v)
-    vehicle = Vehicle(driver, params, scenario.start, 0.0, seed=seed, boot_epoch=boot_epoch)
+    vehicle = Vehicle(driver, params, scenario.start, 0.0, seed=seed, boot_epoch=boot_epoch, contingency=contingency)
     return driver, vehicle, Endpoint(vehicle, param_file=param_file, **endpoint_options)

@@ -1,4 +1,9 @@
-"""The figures of one run (DESIGN §7: the keys of metrics.json are a contract) and the scenario's verdict."""
+"""The figures of one run (DESIGN §7: the keys of metrics.json are a contract) and the scenario's verdict.
+
+Positions are compared in one frame, the true one (the simulator's ground truth): the loss and rest positions,
+distances and displacements, and the return target, which the vehicle chose in its estimate frame, is taken as
+where the robot truly was when it laid that crumb. ``frames`` in metrics.json says this per key.
+"""
 
 from __future__ import annotations
 
@@ -7,11 +12,20 @@ import math
 import numpy as np
 
 from sim.runner import Run
+from vehicle.app import DT, State
+from vehicle.link_watch import GOOD_QUALITY as GOOD_LINK_QUALITY
 
 KEYS = ("scenario", "vehicle", "seed", "sim_duration_s", "link_lost_s", "return_started_s", "reaction_latency_s",
         "link_regained_s", "distance_back_m", "max_displacement_m", "final_target_error_m", "collisions",
         "stale_commands_executed", "commands_rejected", "estimator_rmse_m", "trail_points",
-        "trail_max_deviation_m", "real_time_factor", "lease_events", "passed", "failures")
+        "trail_max_deviation_m", "real_time_factor", "lease_events", "passed", "failures",
+        # added compatibly (DESIGN §7, §9)
+        "policy", "loss_position", "rest_position", "rest_link_quality", "link_cycles", "regained_by",
+        "collisions_during_return", "return_speed_mps", "blocks", "frames")
+FRAMES = {"loss_position": "true", "rest_position": "true", "distance_back_m": "true", "max_displacement_m": "true",
+          "final_target_error_m": "true (the target crumb where the robot truly was when it laid it)",
+          "blocks": "true", "return_speed_mps": "true"}
+REGAIN_MOVED_M = 0.5  # m an operator must have moved the robot after the return for the regain to be its doing
 DISPLACEMENT_SLACK = 0.5  # m of path-tracking overshoot tolerated at the displacement circle
 
 
@@ -41,14 +55,19 @@ def compute(run: Run) -> dict:
     v, sc, tr = run.vehicle, run.scenario, run.trace
     events = run.lease_events
     timeout = v.params["LNK_TIMEOUT"]
-    first_return = next((e for e in v.event_log if e.current is not None and _holder_is_service(e)), None)
+    first_return = next((e.t for e in v.event_log if e.current is not None and _holder_is_service(e)), None)
     lost = run.losses[0] if run.losses else None
     reaction = None
     comms_return = next((e for e in v.event_log if e.reason.name == "COMMS_LOST" and _holder_is_service(e)), None)
+    # a baseline may take over later than its lease (SmartRTL waits FS_TIMEOUT): its return starts when it acts
+    acted = getattr(v.contingency, "acted", None)
+    if acted is not None:
+        first_return = acted[0] if acted else None
     if comms_return is not None:
         heard = next((h for t, h in run.losses if abs(t - comms_return.t) < 1e-9), None)
-        if heard is not None:
-            reaction = comms_return.t - heard - timeout
+        start = comms_return.t if acted is None else next((a for a in acted if a >= comms_return.t - 1e-9), None)
+        if heard is not None and start is not None:
+            reaction = start - heard - timeout
     # the link counts as back when the vehicle says so: LINK_REGAINED ending a block, or after a block completed
     regained = run.link_backs[0][0] if run.link_backs else None
     blocks = run.blocks
@@ -60,15 +79,15 @@ def compute(run: Run) -> dict:
         if first.reason == "LINK_REGAINED" and run.regains and run.regains[0][1] is not None:
             # halted because the link came back: the place that matters is where it came back
             final_err = math.dist(first.end, run.true_at(run.regains[0][1]))
-        elif first.target is not None:
-            final_err = math.dist(first.end, first.target)
+        elif first.target_true is not None:
+            final_err = math.dist(first.end, first.target_true)
     true, est = np.array(tr.true), np.array(tr.est)
     rmse = float(np.sqrt(np.mean(np.sum((true - est) ** 2, axis=1)))) if len(true) else 0.0
     poly = np.vstack([v.trail.points(), [[v.estimator.pose.x, v.estimator.pose.y]]])
     deviation = path_deviation(est[::5], poly)
     m = {
         "scenario": sc.name, "vehicle": run.kind, "seed": run.seed, "sim_duration_s": _r(run.t, 2),
-        "link_lost_s": _r(lost[1] if lost else None), "return_started_s": _r(first_return.t if first_return else None),
+        "link_lost_s": _r(lost[1] if lost else None), "return_started_s": _r(first_return),
         "reaction_latency_s": _r(reaction, 4), "link_regained_s": _r(regained),
         "distance_back_m": _r(distance_back, 2), "max_displacement_m": _r(max_disp, 2),
         "final_target_error_m": _r(final_err, 2), "collisions": run.world.collisions,
@@ -77,11 +96,87 @@ def compute(run: Run) -> dict:
         "estimator_rmse_m": _r(rmse), "trail_points": v.trail.count, "trail_max_deviation_m": _r(deviation),
         "real_time_factor": _r(run.t / run.wall if run.wall > 0 else None, 1), "lease_events": events,
     }
+    m["passed"], m["failures"] = True, []
+    m.update(after_loss(run))
+    m["frames"] = dict(FRAMES)
     failures = verdict(run, m)
     m["passed"] = not failures
     m["failures"] = failures
     assert tuple(m) == KEYS
     return m
+
+
+def _point(p: tuple[float, float] | None) -> list[float] | None:
+    return None if p is None else [round(float(p[0]), 3), round(float(p[1]), 3)]
+
+
+def _first_chain_end(run: Run) -> tuple[float | None, int | None]:
+    """When the return chain started by the first COMMS_LOST ended (an operator lease current again), and the
+    tick index of that moment; (None, None) if it never ended or never started."""
+    if not run.losses:
+        return None, None
+    t_loss = run.losses[0][0]
+    tr = run.trace
+    k0 = next((k for k, t in enumerate(tr.t) if t >= t_loss - 1e-9), None)
+    if k0 is None:
+        return None, None
+    for k in range(k0, len(tr.t)):
+        if tr.holder[k] == 1:  # OPERATOR
+            return tr.t[k], k
+    return None, None
+
+
+def after_loss(run: Run) -> dict:
+    """The added §7 keys: what the first link loss did, and what the return made of it.
+
+    - ``loss_position``: true position when the owner was last heard before the first COMMS_LOST (the same for
+      every policy of a paired trial, which are identical until then).
+    - ``rest_position``: true position where the chain of that loss left the robot: at the last tick before an
+      operator drove it again (a claimed operator lease), or at the end of the run.
+    - ``rest_link_quality``: the owner's packet delivery probability there.
+    - ``link_cycles``: number of COMMS_LOST events.
+    - ``regained_by`` (None if the vehicle never regained its owner's link after the loss): "return" when the
+      contact that regained it began while a service block held the lease, or the link was good where the chain
+      left the robot (delivery at rest >= GOOD_LINK_QUALITY: the vehicle's own link estimate may take a moment
+      to believe it, while the operator already claims and drives), or began before anyone moved the robot
+      more than REGAIN_MOVED_M from there; "operator" when it began only after an operator claim had moved the
+      robot out of a place where the link was still poor.
+    - ``collisions_during_return``: collisions while a service block held the lease.
+    - ``return_speed_mps``: distance driven under service blocks over the time they commanded motion.
+    - ``blocks``: one record per service block (true frame).
+    """
+    tr, v = run.trace, run.vehicle
+    loss = rest = quality = regained_by = None
+    if run.losses and run.losses[0][1] is not None:
+        loss = run.true_at(run.losses[0][1])
+    end_t, end_k = _first_chain_end(run)
+    if run.losses and tr.t:
+        k_rest = len(tr.t) - 1
+        if end_k is not None:
+            k_rest = next((k - 1 for k in range(end_k, len(tr.t)) if tr.state[k] == State.TELEOP), k_rest)
+        rest, quality = tr.true[k_rest], tr.link[k_rest]
+        t_loss = run.losses[0][0]
+        # the contact that brought the link back began at ``since`` (LINK_REGAINED is declared LNK_REGAIN_S later)
+        back = next(((t, since) for t, since in run.link_backs if t >= t_loss - 1e-9), None)
+        if back is not None:
+            since = back[1] if back[1] is not None else back[0]
+            if end_t is None or since <= end_t + 1e-9 or quality >= GOOD_LINK_QUALITY:
+                regained_by = "return"
+            else:
+                k_back = min(len(tr.t) - 1, max(0, int(round(since / DT)) - 1))
+                moved = max((math.dist(tr.true[k], rest) for k in range(end_k, k_back + 1)), default=0.0)
+                regained_by = "operator" if moved > REGAIN_MOVED_M else "return"
+    driving = sum(b.driving_s for b in run.blocks)
+    blocks = [{"index": b.index, "command": b.command, "start_s": _r(b.started), "end_s": _r(b.ended),
+               "reason": b.reason or None, "distance_m": _r(b.distance, 2), "displacement_m": _r(b.max_disp, 2),
+               "limit_m": _r(b.max_disp_allowed, 2)} for b in run.blocks]
+    return {
+        "policy": run.policy, "loss_position": _point(loss), "rest_position": _point(rest),
+        "rest_link_quality": _r(quality), "link_cycles": sum(1 for e in v.event_log if e.reason.name == "COMMS_LOST"),
+        "regained_by": regained_by, "collisions_during_return": sum(b.collisions for b in run.blocks),
+        "return_speed_mps": _r(sum(b.distance for b in run.blocks) / driving if driving > 0 else None),
+        "blocks": blocks,
+    }
 
 
 def _holder_is_service(e) -> bool:
@@ -113,6 +208,8 @@ def verdict(run: Run, m: dict) -> list[str]:
         out.append(f"distance back {m['distance_back_m']} m < {c.min_distance_back_m} m")
     if m["commands_rejected"] < c.min_commands_rejected:
         out.append(f"{m['commands_rejected']} commands rejected < {c.min_commands_rejected}")
+    if c.regained_by is not None and m["regained_by"] != c.regained_by:
+        out.append(f"link regained by {m['regained_by']}, expected by {c.regained_by}")
     if c.chain_reasons:
         got = [b.reason for b in run.blocks]
         if got[:len(c.chain_reasons)] != list(c.chain_reasons):
@@ -125,13 +222,17 @@ def summary(run: Run, m: dict) -> str:
         return "-" if x is None else f"{x:.{nd}f}{unit}"
 
     lines = [
-        f"returnlink sim run {m['scenario']} --vehicle {m['vehicle']} --seed {m['seed']}",
+        f"returnlink sim run {m['scenario']} --vehicle {m['vehicle']} --seed {m['seed']} --policy {m['policy']}",
         f"  simulated {f(m['sim_duration_s'], ' s')} at {f(m['real_time_factor'], 'x real time')}",
         f"  link lost at {f(m['link_lost_s'], ' s')}, return began {f(m['return_started_s'], ' s')}"
         f" (reaction {f(m['reaction_latency_s'], ' s', 3)} after LNK_TIMEOUT)",
         f"  link regained at {f(m['link_regained_s'], ' s')}; drove {f(m['distance_back_m'], ' m')} back,"
         f" max displacement {f(m['max_displacement_m'], ' m')}, target error {f(m['final_target_error_m'], ' m', 2)}",
-        f"  collisions {m['collisions']}, stale commands executed {m['stale_commands_executed']},"
+        f"  loss at {m['loss_position']}, at rest at {m['rest_position']}"
+        f" (delivery {f(m['rest_link_quality'], '', 2)}), link regained by {m['regained_by'] or '-'},"
+        f" {m['link_cycles']} link losses (true frame)",
+        f"  collisions {m['collisions']} ({m['collisions_during_return']} during returns), stale commands executed"
+        f" {m['stale_commands_executed']},"
         f" commands rejected {m['commands_rejected']}",
         f"  estimator RMSE {f(m['estimator_rmse_m'], ' m', 2)}, trail {m['trail_points']} points"
         f" (max deviation {f(m['trail_max_deviation_m'], ' m', 2)})",

@@ -34,10 +34,12 @@ def draw_world(ax, world: World, bounds: tuple[float, float, float, float] | Non
     ax.set_ylabel("north (m)")
 
 
-def draw_trail(ax, points: np.ndarray, good: np.ndarray) -> None:
+def draw_trail(ax, points: np.ndarray, good: np.ndarray, frame: str = "") -> None:
+    """Crumbs by link tag; ``frame`` is appended to the labels (" (estimate frame)") where frames are mixed."""
     ax.plot(points[:, 1], points[:, 0], color="0.6", lw=0.8, zorder=3)
-    ax.scatter(points[good, 1], points[good, 0], s=10, color="tab:green", zorder=4, label="crumb, link good")
-    ax.scatter(points[~good, 1], points[~good, 0], s=10, color="tab:red", zorder=4, label="crumb, link lost")
+    ax.scatter(points[good, 1], points[good, 0], s=10, color="tab:green", zorder=4,
+               label=f"crumb, link good{frame}")
+    ax.scatter(points[~good, 1], points[~good, 0], s=10, color="tab:red", zorder=4, label=f"crumb, link lost{frame}")
 
 
 def draw_route(ax, route: np.ndarray, start: tuple[float, float], radius: float | None) -> None:

@@ -1,4 +1,10 @@
-"""The two pictures every run leaves behind: where the robot went, and what the leases did over time."""
+"""The two pictures every run leaves behind: where the robot went, and what the leases did over time.
+
+The trajectory is drawn in the true frame (ground truth): paths, where the link was lost and regained, where each
+return started and ended, its displacement circle and its target as the place the robot truly laid that crumb.
+The vehicle's own view, the estimated path, trail and planned route with its target, is drawn too and labelled
+"estimate frame", since that is where the vehicle chose them.
+"""
 
 from __future__ import annotations
 
@@ -16,30 +22,34 @@ STATE_NAMES = ("NO_OWNER", "TELEOP", "AWAITING_CLAIM", "RETURNING", "HOLDING", "
 def _draw_run(ax, run: Run) -> None:
     v, tr = run.vehicle, run.trace
     true, est = np.array(tr.true), np.array(tr.est)
-    ax.plot(true[:, 1], true[:, 0], color="k", lw=0.9, alpha=0.55, label="true path")
-    ax.plot(est[:, 1], est[:, 0], color="tab:orange", lw=0.9, alpha=0.8, label="estimated path")
-    draw_trail(ax, v.trail.points(), v.trail.link_good())
+    ax.plot(true[:, 1], true[:, 0], color="k", lw=0.9, alpha=0.55, label="true path (true frame)")
+    ax.plot(est[:, 1], est[:, 0], color="tab:orange", lw=0.9, alpha=0.8, label="estimated path (estimate frame)")
+    draw_trail(ax, v.trail.points(), v.trail.link_good(), " (estimate frame)")
     for b in run.blocks:
         if b.route is not None and len(b.route) >= 2:
             ax.plot(b.route[:, 1], b.route[:, 0], color="tab:blue", lw=2.2, alpha=0.8, zorder=6,
-                    label="return route")
+                    label="return route (estimate frame)")
         if b.target is not None:
-            ax.plot(b.target[1], b.target[0], marker="*", ms=15, color="tab:blue", zorder=7, label="return target")
+            ax.plot(b.target[1], b.target[0], marker="*", ms=15, color="tab:blue", alpha=0.5, zorder=7,
+                    label="return target (estimate frame)")
+        if b.target_true is not None:
+            ax.plot(b.target_true[1], b.target_true[0], marker="*", ms=15, color="tab:cyan", mec="k", zorder=7,
+                    label="return target (true, where its crumb was laid)")
         if math.isfinite(b.max_disp_allowed) and b.max_disp_allowed < 5000:
             a = np.linspace(0, 2 * math.pi, 400)
             ax.plot(b.start[1] + b.max_disp_allowed * np.sin(a), b.start[0] + b.max_disp_allowed * np.cos(a),
-                    ls="--", color="tab:blue", lw=0.8, label="max displacement")
+                    ls="--", color="tab:blue", lw=0.8, label="max displacement (around the true start)")
         if b.end is not None:
             ax.plot(b.end[1], b.end[0], marker="s", ms=7, color="tab:blue", mfc="white", zorder=8,
-                    label="return ended")
+                    label="return ended (true)")
     for _t, heard in run.losses:
         if heard is not None:
             x, y = run.true_at(heard)
-            ax.plot(y, x, marker="X", ms=12, color="tab:red", zorder=9, label="link lost (last heard)")
+            ax.plot(y, x, marker="X", ms=12, color="tab:red", zorder=9, label="link lost (last heard, true)")
     for _t, since in run.link_backs:
         if since is not None:
             x, y = run.true_at(since)
-            ax.plot(y, x, marker="P", ms=12, color="tab:green", zorder=9, label="link back")
+            ax.plot(y, x, marker="P", ms=12, color="tab:green", zorder=9, label="link back (true)")
 
 
 def _return_box(run: Run, margin: float = 3.0) -> tuple[float, float, float, float] | None:
@@ -47,6 +57,7 @@ def _return_box(run: Run, margin: float = 3.0) -> tuple[float, float, float, flo
     pts = []
     for b in run.blocks:
         pts += [b.start] + ([b.end] if b.end else []) + ([b.target] if b.target else [])
+        pts += [b.target_true] if b.target_true else []
         if b.route is not None:
             pts += [tuple(p) for p in b.route]
     pts += [run.true_at(h) for _t, h in run.losses if h is not None]
@@ -63,7 +74,7 @@ def trajectory(run: Run, path: Path) -> Path:
     draw_world(ax, run.world, run.scenario.bounds)
     _draw_run(ax, run)
     m = run.metrics or {}
-    ax.set_title(f"{run.scenario.name} ({run.kind}, seed {run.seed}): "
+    ax.set_title(f"{run.scenario.name} ({run.kind}, seed {run.seed}, policy {run.policy}; true frame): "
                  f"{'PASSED' if m.get('passed') else 'FAILED'}, back {m.get('distance_back_m')} m")
     handles, labels = ax.get_legend_handles_labels()
     uniq = dict(zip(labels, handles, strict=True))
@@ -124,5 +135,5 @@ def timeline(run: Run, path: Path) -> Path:
     ax.plot(t, back, color="tab:blue")
     ax.set_ylabel("distance back (m)")
     ax.set_xlabel("simulated time (s)")
-    fig.suptitle(f"{run.scenario.name} ({run.kind}, seed {run.seed})")
+    fig.suptitle(f"{run.scenario.name} ({run.kind}, seed {run.seed}, policy {run.policy})")
     return save(fig, path)

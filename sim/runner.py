@@ -4,6 +4,11 @@ Every tick: radio deliveries due -> ground stations and vehicle parse real MAVLi
 scripted operator -> the vehicle loop -> physics -> every frame either side sent goes through the radio model
 (per-packet loss and latency, both directions) onto a lockstep bus. Nothing reads the wall clock except the
 real-time-factor figure, so the same scenario and seed give the same metrics.
+
+Every random draw comes from a stream of its own subsystem, derived from the seed by name (the robot, the
+sensors, the shadowing field, each direction of each station's radio link): a run flown under another link-loss
+policy (``policy=``, DESIGN §9) sees the same world, noise and packet fates, and so the same trace, until the
+first COMMS_LOST, where only the policy differs.
 """
 
 from __future__ import annotations
@@ -25,10 +30,13 @@ from link.radio import LinkState, Radio
 from link.transports import LockstepBus
 from sim.driver import simulated_vehicle
 from sim.operator import Operator
-from sim.policies import DEFAULT_POLICY, check_policy
-from sim.scenario import Scenario
+from sim.policies import DEFAULT_POLICY, check_policy, make_policy
+from sim.policies.base import Baseline
+from sim.scenario import PLAN_COMMANDS, Scenario
 from vehicle.app import DT
 from vehicle.lease import Holder
+
+COMMAND_NAMES = {num: name for name, num in PLAN_COMMANDS.items()}
 
 
 @dataclass
@@ -62,12 +70,15 @@ class Trace:
 
 @dataclass
 class BlockRecord:
-    """One return block as it ran, in true positions."""
+    """One return block as it ran. ``start``, ``end``, ``target_true``, distance and displacement are in the true
+    frame; ``target`` and ``route`` are the vehicle's plan, in its estimate frame."""
 
     index: int
     started: float
     start: tuple[float, float]
+    command: str = ""
     target: tuple[float, float] | None = None
+    target_true: tuple[float, float] | None = None  # where the robot truly was when it laid the target crumb
     max_disp_allowed: float = math.inf
     ended: float | None = None
     end: tuple[float, float] | None = None
@@ -76,6 +87,9 @@ class BlockRecord:
     route_obj: object = None
     distance: float = 0.0
     max_disp: float = 0.0
+    driving_s: float = 0.0  # time the return commanded motion
+    collisions: int = 0  # during this block
+    collisions0: int = 0  # the world's count when it started
 
 
 class Run:
@@ -83,13 +97,12 @@ class Run:
                  progress: bool = False, duration: float | None = None, policy: str = DEFAULT_POLICY) -> None:
         self.scenario = sc = scenario
         self.policy = check_policy(policy)
-        if self.policy != DEFAULT_POLICY:
-            raise ValueError(f"policy {policy!r} cannot be flown yet")
         self.kind = vehicle or sc.vehicle
         self.seed = sc.seed if seed is None else seed
-        self.driver, self.vehicle, self.endpoint = simulated_vehicle(sc, self.kind, self.seed)
+        self.driver, self.vehicle, self.endpoint = simulated_vehicle(sc, self.kind, self.seed,
+                                                                     contingency=make_policy(self.policy))
         self.world = self.driver.world
-        self.radio = Radio(sc.radio, self.world.attenuation_db, self.seed + 1)
+        self.radio = Radio(sc.radio, self.world.attenuation_db, self.seed)
         self.radio_report = RadioReport()
         self.bus = LockstepBus()
         self.stations: dict[str, StationSim] = {}
@@ -188,7 +201,8 @@ class Run:
     def _transmit(self, st: StationSim, src: str, dst: str, data: bytes, t: float) -> None:
         if st.state is None or self._jammed(st.name, t):
             return
-        at = self.radio.arrival(st.state, t, (src, dst))
+        direction = "downlink" if src == "vehicle" else "uplink"
+        at = self.radio.arrival(st.state, t, (src, dst), f"{direction}.{st.name}")
         if at is not None:
             self.bus.send(src, dst, data, at)
 
@@ -258,24 +272,50 @@ class Run:
             self._close_block()
             blk = None
         if returning and blk is None:
-            # the tick a block becomes current, the service still holds the previous block's state
-            st = v.service if v.service_index == cur.index else None
-            target = st.route.target if st is not None and st.route is not None else None
-            blk = BlockRecord(cur.index, t, (float(pos[0]), float(pos[1])), target,
-                              st.max_displacement if st is not None else math.inf)
+            blk = BlockRecord(cur.index, t, (float(pos[0]), float(pos[1])), self._command_of(cur),
+                              collisions0=self.world.collisions)
             self.blocks.append(blk)
         if blk is not None:
             if len(tr.true) > 1:
                 a, b = tr.true[-2], tr.true[-1]
                 blk.distance += math.hypot(b[0] - a[0], b[1] - a[1])
+                if v.command_out != (0.0, 0.0):
+                    blk.driving_s += DT
+            blk.collisions = self.world.collisions - blk.collisions0
             blk.max_disp = max(blk.max_disp, math.hypot(pos[0] - blk.start[0], pos[1] - blk.start[1]))
-            st = v.service if v.service_index == blk.index else None
-            if st is not None and st.route is not None and st.route is not blk.route_obj:
-                blk.route_obj = st.route
-                blk.route = st.route.points if blk.route is None else np.vstack([blk.route, st.route.points])
-                if blk.target is None:
-                    blk.target = st.route.target
-                    blk.max_disp_allowed = st.max_displacement
+            self._plan_of(v, blk)
+
+    def _command_of(self, lease) -> str:
+        """The block's mission items by name (RETURN_TO_LINK, ...), or the baseline policy that drives it."""
+        if self.policy != DEFAULT_POLICY:
+            return self.policy.upper()
+        items = lease.block.payload if lease.block is not None else ()
+        return "+".join(COMMAND_NAMES.get(it.command, str(it.command)) for it in items)
+
+    def _plan_of(self, v, blk: BlockRecord) -> None:
+        """Target, route and displacement limit of ``blk``, taken only from the service state of that very lease:
+        the state left over from the block before must never lend its limit to the next one."""
+        c = v.contingency
+        if isinstance(c, Baseline):
+            if c.route is not None and c.route is not blk.route_obj:
+                blk.route_obj, blk.route, blk.target = c.route, c.route, c.target
+                # every baseline heads for home, where the estimator started: the true start of the run
+                blk.target_true = self.trace.true[0] if c.target is not None and self.trace.true else None
+            return
+        st = v.service
+        if st is None or v.service_index != blk.index:
+            return
+        if st.route is not None and st.route is not blk.route_obj:
+            blk.route_obj = st.route
+            blk.route = st.route.points if blk.route is None else np.vstack([blk.route, st.route.points])
+            if blk.target is None and st.route.target is not None:
+                blk.target = st.route.target
+                k = st.route.target_index
+                times = v.trail.times()
+                if 0 <= k < len(times):
+                    blk.target_true = self.true_at(float(times[k]))
+        if blk.max_disp_allowed == math.inf:
+            blk.max_disp_allowed = st.max_displacement
 
     def _audit(self, v) -> None:
         """An independent check of the stale-command guard: a teleop setpoint that moved the robot this tick must

@@ -75,6 +75,10 @@ class Criteria:
     min_distance_back_m: float | None = None
     min_commands_rejected: int = 0
     chain_reasons: tuple[str, ...] = ()
+    regained_by: str | None = None  # "return" or "operator": who must have brought the link back (metrics §7)
+
+
+REGAINED_BY = ("return", "operator")
 
 
 @dataclass(frozen=True)
@@ -359,7 +363,10 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
         r.number(crit_raw, "min_distance_back_m", "criteria.min_distance_back_m", None, 0),
         int(r.number(crit_raw, "min_commands_rejected", "criteria.min_commands_rejected", 0, 0)),
         tuple(reasons),
+        r.get(crit_raw, "regained_by", "criteria.regained_by", str, None),
     )
+    if crit.regained_by is not None and crit.regained_by not in REGAINED_BY:
+        raise r.fail("criteria.regained_by", f"must be one of {', '.join(REGAINED_BY)}, got {crit.regained_by!r}")
     return Scenario(
         name=name, description=r.get(raw, "description", "description", str, ""), file=file,
         duration=r.number(raw, "duration", "duration", lo=1.0, hi=36000.0),

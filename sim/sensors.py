@@ -1,5 +1,9 @@
 """Simulated sensors: position fixes, odometry, a drifting rate gyro and a forward accelerometer. Seeded, so runs are
-deterministic."""
+deterministic.
+
+The generator passed in is the sensors' own stream (``link.radio.subsystem_rng(seed, "sensors")`` in a run): draws
+here never shift the robot's or the radio's, and theirs never shift these.
+"""
 
 from __future__ import annotations
 

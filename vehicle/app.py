@@ -13,6 +13,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Protocol
 
 from vehicle.estimator import Estimator
 from vehicle.io import Readings, RobotDriver
@@ -27,6 +28,7 @@ from vehicle.lease import (
     Outcome,
     QueuedCommand,
     RejectReason,
+    ServiceBlock,
     Verdict,
     epoch_before,
 )
@@ -80,22 +82,42 @@ def trail_config(params: Params) -> TrailConfig:
                        loop_distance=params["TRL_LOOP_D"], max_points=int(params["TRL_MAX_PTS"]))
 
 
+class Contingency(Protocol):
+    """What the vehicle does, in place of its return plan's blocks, while a return-service lease is current.
+
+    The one door for comparing link-loss behaviours on this very vehicle (DESIGN §9): the lease book, its
+    triggers, telemetry and MAVLink stay exactly as they are, only the driving during a return differs. The
+    simulator's baselines (hold, straight-line RTL, SmartRTL, back-up) implement it; a robot leaves it None.
+    """
+
+    halts_on_regain: bool  # False: LINK_REGAINED does not end the running block (it runs to its own end)
+
+    def observe(self, vehicle: Vehicle, t: float) -> None:
+        """Every tick, after the estimator: a behaviour that keeps its own memory (SmartRTL's path) records."""
+
+    def drive(self, vehicle: Vehicle, t: float, x: float, y: float, yaw: float) -> tuple[float, float,
+                                                                                       ExpireReason | None]:
+        """One tick of the current service lease: speed, yaw rate, and why the block ended (None: running)."""
+
+
 class Vehicle:
     """The onboard state machine around the pure parts. Mutable: it is the shell that owns the current book."""
 
     def __init__(self, driver: RobotDriver, params: Params, pose: tuple[float, float, float], t: float = 0.0,
-                 seed: int = 0, boot_epoch: int | None = None) -> None:
+                 seed: int = 0, boot_epoch: int | None = None, contingency: Contingency | None = None) -> None:
         """``boot_epoch``: the first epoch to issue, drawn at boot by a real-time vehicle (``vehicle.epochs``);
-        None derives it from ``seed``, as only the lockstep simulator may (DESIGN §3.1)."""
+        None derives it from ``seed``, as only the lockstep simulator may (DESIGN §3.1). ``contingency``: a
+        link-loss behaviour to fly instead of the return plan (the simulator's baselines)."""
         self.driver = driver
         self.params = params
         self.seed = seed
+        self.contingency = contingency
         self.on_epoch: Callable[[int], str | None] | None = None  # told of each epoch issued, before its ACK
         x, y, yaw = pose
         self.home = (x, y)
         self.estimator = Estimator(x, y, yaw, t, pos_std=0.3, yaw_std=0.02)
         self.trail = Trail(trail_config(params))
-        self.book = LeaseBook(lease_config(params), plan=default_plan(params),
+        self.book = LeaseBook(lease_config(params), plan=self._blocks(default_plan(params)),
                               last_epoch=None if boot_epoch is None else epoch_before(boot_epoch))
         self.plan_items: tuple[PlanItem, ...] = ()  # the uploaded return plan (empty: the default plan)
         self.t = t
@@ -136,6 +158,14 @@ class Vehicle:
             self.notices.append(ev.describe())
         for q in out.released:
             self._execute(q.payload, q.lease, q.sender)
+
+    def _blocks(self, blocks: tuple[ServiceBlock, ...]) -> tuple[ServiceBlock, ...]:
+        """The blocks as the lease book schedules them: a contingency that does not halt when the link comes
+        back (SmartRTL) keeps its block running through LINK_REGAINED."""
+        c = self.contingency
+        if c is None or c.halts_on_regain:
+            return blocks
+        return tuple(replace(b, halt_on_regain=False) for b in blocks)
 
     def refuses(self, sender: int) -> bool:
         """Someone else owns the vehicle: a state change from ``sender`` is refused, and counted."""
@@ -244,7 +274,7 @@ class Vehicle:
         if not blocks:
             blocks = default_plan(self.params)
         self.plan_items = tuple(items)
-        self._apply(self.book.schedule_plan(blocks, t))
+        self._apply(self.book.schedule_plan(self._blocks(blocks), t))
         return None
 
     def return_now(self, items: tuple[PlanItem, ...], sender: int, compid: int, t: float) -> Check:
@@ -256,7 +286,7 @@ class Vehicle:
             return self._reject(Check(Verdict.REJECT, None, RejectReason.NOT_IN_CONTROL, "not the owner"))
         if cur.holder is not Holder.OPERATOR:
             return Check(Verdict.EXECUTE, self.book.current_id, detail="a return is already running")
-        self._apply(self.book.schedule_plan(blocks_from_items(items, self.params), t, store=False))
+        self._apply(self.book.schedule_plan(self._blocks(blocks_from_items(items, self.params)), t, store=False))
         return self.rtl(sender, compid, t)
 
     def set_plan_start(self, seq: int, sender: int, compid: int, t: float) -> str | None:
@@ -275,7 +305,7 @@ class Vehicle:
         blocks = blocks_from_items(items[seq:], self.params)
         # keep the seq numbers of the whole mission
         blocks = tuple(replace(b, payload=tuple(replace(it, seq=it.seq + seq) for it in b.payload)) for b in blocks)
-        self._apply(self.book.schedule_plan(blocks, t, store=False))
+        self._apply(self.book.schedule_plan(self._blocks(blocks), t, store=False))
         return None
 
     def route_remaining(self) -> float:
@@ -289,7 +319,7 @@ class Vehicle:
         v = self.params.set(name, value)
         self.book = self.book.with_config(lease_config(self.params))
         if not self.plan_items and name.startswith("RTL_"):
-            self._apply(self.book.schedule_plan(default_plan(self.params), self.t))
+            self._apply(self.book.schedule_plan(self._blocks(default_plan(self.params)), self.t))
         return v
 
     # ----- queries -----------------------------------------------------------------------------------------
@@ -332,6 +362,8 @@ class Vehicle:
             self.last_fix, self.last_fix_t = (r.fix.x, r.fix.y), t
         p = est.pose
         self.link_is_good = self.link_good(t)
+        if self.contingency is not None:
+            self.contingency.observe(self, t)
         self._crumbs.append(Crumb(p.x, p.y, t, p.std, self.link_is_good))
 
         self._apply(self.book.tick(t))
@@ -369,6 +401,8 @@ class Vehicle:
             self.service, self.service_index = None, None
             return self._teleop(t)
         self.setpoint = None
+        if self.contingency is not None:
+            return self._contingency(t, x, y, yaw)
         link_lost = book.link.lost
         fresh = self.service is None or self.service_index != cur.index
         try:
@@ -404,6 +438,19 @@ class Vehicle:
                             f"block ended, holding")
         self._apply(self.book.finish(index, ExpireReason.STUCK, t))
         return 0.0, 0.0
+
+    def _contingency(self, t: float, x: float, y: float, yaw: float) -> tuple[float, float]:
+        """The injected behaviour drives the current service lease, under a sublease of it like any return."""
+        cur = self.book.current
+        assert cur is not None and self.contingency is not None
+        if self.service_index != cur.index and self.book.current_id is not None:
+            self.service, self.service_index = None, cur.index
+            self.book, _ = self.book.issue_sublease(self.book.current_id)
+        speed, yaw_rate, finished = self.contingency.drive(self, t, x, y, yaw)
+        if finished is not None:
+            self._apply(self.book.finish(cur.index, finished, t))
+            return 0.0, 0.0
+        return speed, yaw_rate
 
     def _teleop(self, t: float) -> tuple[float, float]:
         sp = self.setpoint

@@ -1,0 +1,45 @@
+"""Link-loss policies a trial can fly (DESIGN §9): returnlink itself and the baselines it is compared against.
+
+Every policy runs on the same vehicle and simulator, so only the policy differs between paired trials: the
+lease book, its COMMS_LOST trigger, telemetry, the radio and the operator's script are the same; a baseline is a
+``vehicle.app.Contingency`` that drives the return-service lease instead of the scenario's return plan.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the command line reads the names without loading the vehicle
+    from vehicle.app import Contingency
+
+POLICY_NAMES: tuple[str, ...] = ("returnlink", "hold", "rtl", "smartrtl", "backup")
+DEFAULT_POLICY = "returnlink"
+
+
+def check_policy(name: str) -> str:
+    """The policy name, or ValueError listing the known ones."""
+    if name not in POLICY_NAMES:
+        raise ValueError(f"unknown policy {name!r}; known: {', '.join(POLICY_NAMES)}")
+    return name
+
+
+def make_policy(name: str) -> Contingency | None:
+    """The behaviour to inject into the vehicle for policy ``name``: None for returnlink (its own return plan)."""
+    check_policy(name)
+    if name == "hold":
+        from sim.policies.hold import Hold
+
+        return Hold()
+    if name == "rtl":
+        from sim.policies.rtl import StraightRTL
+
+        return StraightRTL()
+    if name == "smartrtl":
+        from sim.policies.smartrtl import SmartRTL
+
+        return SmartRTL()
+    if name == "backup":
+        from sim.policies.backup import Backup
+
+        return Backup()
+    return None

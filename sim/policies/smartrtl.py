@@ -1,0 +1,193 @@
+"""``smartrtl``: ArduPilot SmartRTL's documented rules, on this vehicle.
+
+The path (``SmartRTLPath``), as the ArduPilot wiki and parameter docs describe it: the position is sampled at
+3 Hz and a point is added when the vehicle has moved more than SRTL_ACCURACY (2 m) from the last point; the path
+is simplified with Ramer-Douglas-Peucker at half the accuracy (1 m) and loops are cut where two segments come
+closer than 0.99 x accuracy (1.98 m), using a pairwise segment scan; the buffer holds SRTL_POINTS (300) points,
+home first, and when it stays full for 15 s (cleanup cannot make room) SmartRTL deactivates for the rest of the
+flight.
+
+The failsafe (``SmartRTL``): Rover's GCS failsafe triggers FS_GCS_TIMEOUT after the last GCS heartbeat and acts
+after FS_TIMEOUT (1.5 s) more; a real Rover SITL switched to SMART_RTL 4.55 s after its last heartbeat with
+FS_GCS_TIMEOUT 3. FS_GCS_TIMEOUT is this vehicle's LNK_TIMEOUT, so the robot stands still from COMMS_LOST until
+then (a heartbeat in that time clears the failsafe and the block ends); an operator's RTL switches to it at
+once. It then runs a thorough cleanup and
+retraces the path newest point first to home, at the return speed returnlink would use, and does not stop when
+the link comes back (it stays in SMART_RTL until home). With SmartRTL deactivated, FS_ACTION 3 ("SmartRTL or
+RTL") falls back to RTL: a straight line home. Points are not recorded while the return runs; after a return the
+path starts again from where it ended.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sim.policies.base import Baseline, Command, PathDriver, return_speed
+from vehicle.app import Vehicle
+from vehicle.lease import ExpireReason, Holder
+
+SRTL_ACCURACY = 2.0  # m
+SRTL_POINTS = 300
+SRTL_SAMPLE_HZ = 3.0
+SRTL_FULL_TIMEOUT = 15.0  # s full before deactivating
+FS_TIMEOUT = 1.5  # s a failsafe condition must last before its action
+
+
+def _seg_seg_dist(p1, p2, q1, q2) -> float:
+    def pt_seg(p, a, b):
+        ab = b - a
+        L2 = float(ab @ ab)
+        u = 0.0 if L2 == 0 else min(1.0, max(0.0, float((p - a) @ ab) / L2))
+        return float(np.hypot(*(p - a - u * ab)))
+
+    return min(pt_seg(p1, q1, q2), pt_seg(p2, q1, q2), pt_seg(q1, p1, p2), pt_seg(q2, p1, p2))
+
+
+def _rdp(pts: list[np.ndarray], tol: float) -> list[np.ndarray]:
+    if len(pts) < 3:
+        return pts
+    keep = [False] * len(pts)
+    keep[0] = keep[-1] = True
+    stack = [(0, len(pts) - 1)]
+    while stack:
+        a, b = stack.pop()
+        best, idx = 0.0, -1
+        ab = pts[b] - pts[a]
+        L2 = float(ab @ ab)
+        for k in range(a + 1, b):
+            ap = pts[k] - pts[a]
+            u = 0.0 if L2 == 0 else min(1.0, max(0.0, float(ap @ ab) / L2))
+            d = float(np.hypot(*(ap - u * ab)))
+            if d > best:
+                best, idx = d, k
+        if best > tol:
+            keep[idx] = True
+            stack += [(a, idx), (idx, b)]
+    return [p for p, k in zip(pts, keep, strict=True) if k]
+
+
+class SmartRTLPath:
+    """SmartRTL's bounded path memory (see the module docstring for its rules)."""
+
+    def __init__(self, accuracy: float = SRTL_ACCURACY, max_points: int = SRTL_POINTS,
+                 timeout: float = SRTL_FULL_TIMEOUT) -> None:
+        self.accuracy, self.max_points, self.timeout = accuracy, max_points, timeout
+        self.points: list[np.ndarray] = []
+        self.active = True
+        self.deactivated_at: float | None = None
+        self._next_sample = 0.0
+        self._full_since: float | None = None
+        self.pair_checks = 0
+
+    def update(self, x: float, y: float, t: float) -> None:
+        if not self.active or t < self._next_sample:
+            return
+        self._next_sample = t + 1.0 / SRTL_SAMPLE_HZ
+        p = np.array([x, y])
+        if self.points and math.hypot(*(p - self.points[-1])) <= self.accuracy:
+            return
+        if len(self.points) >= self.max_points:
+            self._cleanup()
+        if len(self.points) >= self.max_points:
+            if self._full_since is None:
+                self._full_since = t
+            if t - self._full_since >= self.timeout:
+                self.active = False
+                self.deactivated_at = t
+            return
+        self._full_since = None
+        self.points.append(p)
+
+    def restart(self, x: float, y: float) -> None:
+        """The path begins again at ``(x, y)`` (home at arming, or where a return left the vehicle)."""
+        self.points = [np.array([x, y], dtype=float)]
+        self._full_since = None
+
+    def thorough_cleanup(self) -> None:
+        """Simplify and prune the whole path at once, as SmartRTL does when the return starts."""
+        self._cleanup()
+
+    def _cleanup(self) -> None:
+        self.points = _rdp(self.points, 0.5 * self.accuracy)
+        # loop pruning: O(n^2) pair scan of non-adjacent segments
+        pts = self.points
+        i = 0
+        while i < len(pts) - 3:
+            cut = None
+            for j in range(len(pts) - 2, i + 1, -1):
+                self.pair_checks += 1
+                if _seg_seg_dist(pts[i], pts[i + 1], pts[j], pts[j + 1]) < 0.99 * self.accuracy:
+                    cut = j
+                    break
+            if cut is not None:
+                pts = pts[: i + 1] + pts[cut + 1 :]
+            i += 1
+        self.points = pts
+
+
+class SmartRTL(Baseline):
+    """The GCS failsafe with FS_ACTION 3 (SmartRTL or RTL) on this vehicle's lease book."""
+
+    halts_on_regain = False
+
+    def __init__(self, accuracy: float = SRTL_ACCURACY, max_points: int = SRTL_POINTS,
+                 fs_timeout: float = FS_TIMEOUT) -> None:
+        super().__init__()
+        self.path = SmartRTLPath(accuracy, max_points)
+        self.fs_timeout = fs_timeout
+        self.homed = False
+        self.returning = False
+        self.driver: PathDriver | None = None
+        self.fallback = False  # deactivated: it flew RTL instead
+
+    def observe(self, vehicle: Vehicle, t: float) -> None:
+        p = vehicle.estimator.pose
+        cur = vehicle.book.current
+        if self.returning and (cur is None or cur.holder is Holder.OPERATOR):
+            self.finished(vehicle, t)  # taken back by the operator before it ended
+        if not vehicle.armed or self.returning:
+            return
+        if not self.homed:
+            self.path.restart(p.x, p.y)
+            self.homed = True
+        self.path.update(p.x, p.y, t)
+
+    def begin(self, vehicle: Vehicle, t: float, x: float, y: float) -> None:
+        """After a link loss SMART_RTL takes over only when the failsafe acts (``_act``); an operator's RTL (the
+        mode switched by hand) takes over at once."""
+        self.driver = None
+        self.returning = True
+        if not vehicle.book.link.lost:
+            self._act(vehicle, t, x, y)
+
+    def tick(self, vehicle: Vehicle, t: float, x: float, y: float, yaw: float) -> Command:
+        if self.driver is None:
+            link = vehicle.book.link
+            if not link.lost:
+                return 0.0, 0.0, ExpireReason.COMPLETED  # the heartbeat came back first: the failsafe cleared
+            heard = link.last_heard if link.last_heard is not None else t
+            if t + 1e-9 < heard + vehicle.params["LNK_TIMEOUT"] + self.fs_timeout:
+                return 0.0, 0.0, None
+            self._act(vehicle, t, x, y)
+        assert self.driver is not None
+        return self.driver.step(vehicle, t, x, y, yaw)
+
+    def _act(self, vehicle: Vehicle, t: float, x: float, y: float) -> None:
+        self.acted.append(t)
+        if self.path.active and self.path.points:
+            self.path.thorough_cleanup()
+            pts = [np.array([x, y])] + self.path.points[::-1]
+        else:
+            self.fallback = True
+            pts = [np.array([x, y]), np.asarray(vehicle.home, dtype=float)]
+        self.route = np.array(pts)
+        self.target = (float(self.route[-1, 0]), float(self.route[-1, 1]))
+        self.driver = PathDriver(self.route, return_speed(vehicle), t)
+
+    def finished(self, vehicle: Vehicle, t: float) -> None:
+        self.returning = False
+        p = vehicle.estimator.pose
+        if self.path.active and self.homed:
+            self.path.restart(p.x, p.y)
