@@ -170,7 +170,7 @@ def _cmd_sim_replay(args: argparse.Namespace) -> int:
     if differ:
         print(f"returnlink: error: replay differs from the stored trial in {', '.join(differ)}", file=sys.stderr)
         return 1
-    print(f"  metrics identical to the stored trial ({len(stored) - 1} metrics compared)")
+    print("  metrics identical to the stored trial (real_time_factor aside)")
     return 0 if m["passed"] else 1
 
 

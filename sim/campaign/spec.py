@@ -184,7 +184,8 @@ def parse_spec(text: str, file: str = "<spec>", spec_dir: Path | None = None) ->
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         m = re.search(r"line (\d+)", str(e))
-        raise SpecError(file, int(m.group(1)) if m else None, "", f"not valid TOML: {e}") from None
+        line = int(m.group(1)) if m else (max(1, len(r.lines)) if "end of document" in str(e) else None)
+        raise SpecError(file, line, "", f"not valid TOML: {e}") from None
     for k in raw:
         if k not in FIELDS:
             raise r.fail(k, f"unknown field (expected one of {', '.join(FIELDS)})")
