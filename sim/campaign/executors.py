@@ -111,7 +111,8 @@ class RayExecutor:
         if self.address:
             ray.init(address=self.address, **common)
         else:
-            ray.init(num_cpus=self.workers or os.cpu_count() or 1, include_dashboard=False,
+            # "local": a new private instance, even where `ray start` left a cluster address behind
+            ray.init(address="local", num_cpus=self.workers or os.cpu_count() or 1, include_dashboard=False,
                      object_store_memory=OBJECT_STORE_BYTES, _node_ip_address="127.0.0.1", **common)
         self._ray = ray
         cpus = int(ray.cluster_resources().get("CPU", 1))

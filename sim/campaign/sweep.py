@@ -18,9 +18,10 @@ from sim.campaign.trial import run_trial
 class Progress:
     """A bar over trials in the style of ``sim run``'s: redrawn on a terminal, a line every few percent in a log."""
 
-    def __init__(self, total: int, stream=sys.stderr) -> None:
-        self.total, self.done, self.errors, self.stream = total, 0, 0, stream
-        self.tty = stream.isatty()
+    def __init__(self, total: int, stream=None) -> None:
+        self.total, self.done, self.errors = total, 0, 0
+        self.stream = stream if stream is not None else sys.stderr
+        self.tty = self.stream.isatty()
         self.shown = -1
         self.t0 = time.monotonic()
 
