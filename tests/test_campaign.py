@@ -18,25 +18,7 @@ from sim.campaign.spec import MAX_TRIALS, SpecError, load_spec, parse_spec
 from sim.campaign.store import Store, summary
 from sim.campaign.trial import Trial, run_trial, simulate, trial_id
 from sim.cli import main
-from tests.campaign_faults import quick_row
-
-TUNNEL = (Path(__file__).resolve().parent.parent / "sim" / "scenarios" / "tunnel.toml").read_text()
-
-
-def jam_scenario(tmp: Path, name: str = "jam", duration: float = 14.0) -> Path:
-    """The tunnel, cut short, with the link jammed from 3 s to 8 s: a loss, a return and a regain in 14 s."""
-    text = TUNNEL.replace('name = "tunnel"', f'name = "{name}"').replace("duration = 200.0",
-                                                                          f"duration = {duration}")
-    text += '\n[[events]]\nt = 3.0\naction = "jam"\nduration = 5.0\n'
-    path = tmp / f"{name}.toml"
-    path.write_text(text)
-    return path
-
-
-def write_spec(tmp: Path, body: str) -> Path:
-    path = tmp / "spec.toml"
-    path.write_text(body)
-    return path
+from tests.campaign_helpers import TUNNEL, jam_scenario, quick_row, write_spec
 
 
 # ----- specs ---------------------------------------------------------------------------------------------------

@@ -22,9 +22,8 @@ from sim.campaign import executors
 from sim.campaign.executors import RayExecutor
 from sim.campaign.trial import Trial
 from sim.cli import main
-from tests.campaign_faults import dies_once, ignores_alarm
+from tests.campaign_helpers import dies_once, ignores_alarm, jam_scenario, write_spec
 from tests.interop import free_udp_port
-from tests.test_campaign import jam_scenario, write_spec
 
 RAY = Path(sys.executable).with_name("ray")
 
@@ -81,8 +80,14 @@ def _wait_for_port(port: int, timeout: float) -> None:
 def test_sweep_joins_a_cluster_started_with_ray_start(tmp_path, head):
     proc, address = head
     out = tmp_path / "out"
-    assert main(["sim", "sweep", str(small_campaign(tmp_path)), "--out", str(out), "--address", address,
-                 "--quiet"]) == 0
+    # a fresh process, as a user runs it: nothing Ray set up in this one (token mode) may help it connect
+    env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
+    env["PYTHONPATH"] = str(Path(__file__).resolve().parent.parent)
+    r = subprocess.run([sys.executable, "-m", "sim.cli", "sim", "sweep", str(small_campaign(tmp_path)), "--out",
+                        str(out), "--address", address, "--quiet"], env=env, capture_output=True, text=True,
+                       timeout=240)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert f"to run on Ray at {address} (1 CPUs)" in r.stderr
     rows = pq.read_table(out / "trials.parquet").to_pylist()
     assert sorted(r["seed"] for r in rows) == [1, 2] and all(r["status"] != "error" for r in rows)
     assert proc.poll() is None  # joining leaves the cluster running

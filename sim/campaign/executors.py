@@ -71,6 +71,21 @@ def guarded(fn: TrialFn, trial: Trial, timeout_s: float) -> dict:
         return error_row(trial, f"{type(e).__name__}: {e}")
 
 
+def _token_auth_if_available() -> None:
+    """Speak token authentication to a cluster when this machine has a Ray token, as `ray start` does.
+
+    A local ``ray.init()`` leaves a token in ~/.ray/auth_token, and every later ``ray start --head`` on the machine
+    then requires it; but Ray only sends it on its own for ``address="auto"``, not for an explicit HOST:PORT. So
+    with no RAY_AUTH_MODE chosen by the user, a token present means token mode (set before Ray is imported, as Ray
+    reads it once). A cluster without authentication accepts a token too.
+    """
+    if "RAY_AUTH_MODE" in os.environ:
+        return
+    path = os.environ.get("RAY_AUTH_TOKEN_PATH") or os.path.join(os.path.expanduser("~"), ".ray", "auth_token")
+    if os.environ.get("RAY_AUTH_TOKEN") or os.path.isfile(path):
+        os.environ["RAY_AUTH_MODE"] = "token"
+
+
 class SerialExecutor:
     """Trials one after another in this process: for tests and for debugging a single trial."""
 
@@ -105,6 +120,8 @@ class RayExecutor:
 
     def __enter__(self) -> RayExecutor:
         os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # offline: no usage report
+        if self.address:
+            _token_auth_if_available()
         import ray
 
         common = {"log_to_driver": False, "logging_level": logging.ERROR}

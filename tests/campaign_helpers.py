@@ -1,5 +1,6 @@
-"""Trial functions that misbehave on purpose, importable by Ray workers (``tests.campaign_faults``), for the
-campaign tests: a worker that dies once, a trial that ignores the alarm, a trial that is quick and fine."""
+"""Helpers of the campaign tests: a short scenario with a link loss, spec files, and trial functions that
+misbehave on purpose (a worker that dies once, a trial that ignores the alarm), importable by Ray workers as
+``tests.campaign_helpers``."""
 
 from __future__ import annotations
 
@@ -9,6 +10,24 @@ import time
 from pathlib import Path
 
 from sim.campaign.trial import Trial, inputs_row
+
+TUNNEL = (Path(__file__).resolve().parent.parent / "sim" / "scenarios" / "tunnel.toml").read_text()
+
+
+def jam_scenario(tmp: Path, name: str = "jam", duration: float = 14.0) -> Path:
+    """The tunnel, cut short, with the link jammed from 3 s to 8 s: a loss, a return and a regain in 14 s."""
+    text = TUNNEL.replace('name = "tunnel"', f'name = "{name}"').replace("duration = 200.0",
+                                                                          f"duration = {duration}")
+    text += '\n[[events]]\nt = 3.0\naction = "jam"\nduration = 5.0\n'
+    path = tmp / f"{name}.toml"
+    path.write_text(text)
+    return path
+
+
+def write_spec(tmp: Path, body: str) -> Path:
+    path = tmp / "spec.toml"
+    path.write_text(body)
+    return path
 
 
 def quick_row(trial: Trial, **metrics) -> dict:
