@@ -51,3 +51,14 @@ def ignores_alarm(trial: Trial) -> dict:
         signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGALRM})
     while True:
         time.sleep(0.2)
+
+
+def sleeps(trial: Trial) -> dict:
+    """Sleeps far past any test's timeout, in a way the alarm can interrupt."""
+    time.sleep(60)
+    return quick_row(trial)
+
+
+def pid_row(trial: Trial) -> dict:
+    """A quick row carrying the worker's process id, in ``error`` (a free text column)."""
+    return {**quick_row(trial), "error": str(os.getpid())}

@@ -319,3 +319,12 @@ def test_sim_run_bad_param_or_plan_exits_2(args, words, capsys):
         main(["sim", "run", "tunnel", *args])
     assert e.value.code == 2
     assert words in capsys.readouterr().err
+
+
+def test_rows_store_nested_metrics_as_json_text(tmp_path):
+    store = Store(tmp_path)
+    store.add(row(0, link_cycles=2.0, blocks=[{"index": 2, "reason": "COMPLETED"}], loss_position=(1.5, -2.0)))
+    store.flush()
+    (back,) = pq.read_table(tmp_path / "trials.parquet").to_pylist()
+    assert back["link_cycles"] == 2 and json.loads(back["blocks"]) == [{"index": 2, "reason": "COMPLETED"}]
+    assert json.loads(back["loss_position"]) == [1.5, -2.0]

@@ -22,7 +22,7 @@ from sim.campaign import executors
 from sim.campaign.executors import RayExecutor
 from sim.campaign.trial import Trial
 from sim.cli import main
-from tests.campaign_helpers import dies_once, ignores_alarm, jam_scenario, write_spec
+from tests.campaign_helpers import dies_once, ignores_alarm, jam_scenario, pid_row, sleeps, write_spec
 from tests.interop import free_udp_port
 
 RAY = Path(sys.executable).with_name("ray")
@@ -93,16 +93,24 @@ def test_sweep_joins_a_cluster_started_with_ray_start(tmp_path, head):
     assert proc.poll() is None  # joining leaves the cluster running
 
 
-def test_ray_retries_a_dead_worker_once_and_kills_a_trial_that_hangs(tmp_path, monkeypatch, head):
-    monkeypatch.setattr(executors, "HARD_KILL_GRACE_S", 1.0)
+def test_ray_retries_a_dead_worker_once_and_ends_trials_past_their_timeout(tmp_path, monkeypatch, head):
     crash = [Trial("x", str(tmp_path / "x.toml"), "name = 'x'\n", "rover", s) for s in (1, 2)]
-    hang = Trial("y", str(tmp_path / "y.toml"), "name = 'y'\n", "rover", 3)
+    slow, hang, after = (Trial("y", str(tmp_path / "y.toml"), "name = 'y'\n", "rover", s) for s in (3, 4, 5))
     with RayExecutor(address=head[1]) as ex:
         rows = list(ex.map(crash, 60.0, dies_once))
+        (before,) = ex.map([after], 60.0, pid_row)
+        monkeypatch.setattr(executors, "HARD_KILL_GRACE_S", 120.0)
+        (alarmed,) = ex.map([slow], 1.0, sleeps)
+        (kept,) = ex.map([after], 60.0, pid_row)
+        monkeypatch.setattr(executors, "HARD_KILL_GRACE_S", 1.0)
         (stuck,) = ex.map([hang], 1.0, ignores_alarm)
     assert sorted(r["seed"] for r in rows) == [1, 2]
     assert all(r["status"] == "ok" for r in rows)  # each worker died once; the retry finished the trial
     assert (tmp_path / "x.died-1").is_file() and (tmp_path / "x.died-2").is_file()
+    # the alarm ends a slow trial inside its worker, which lives on for the next trial
+    assert alarmed["status"] == "error" and alarmed["error"] == "timed out after 1 s (wall clock)"
+    assert kept["error"] == before["error"]
+    # a trial deaf to the alarm is killed from the driver
     assert stuck["status"] == "error" and stuck["error"] == "timed out after 1 s (wall clock)"
 
 

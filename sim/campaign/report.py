@@ -34,7 +34,7 @@ def _legend(ax) -> None:
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="lower right", fontsize=8)
     else:
-        ax.text(0.5, 0.5, "no trial with this figure", ha="center", transform=ax.transAxes, color="0.4")
+        ax.text(0.5, 0.5, "no trial has this metric", ha="center", transform=ax.transAxes, color="0.4")
 
 
 def _per_policy(rows: list[dict], value) -> dict[str, tuple[list[float], int]]:
@@ -58,7 +58,7 @@ def plot_time_to_link(rows: list[dict], path: Path) -> Path:
     ax.set_ylim(0, 1.02)
     ax.grid(alpha=0.3)
     _legend(ax)
-    ax.set_title("Time to link, per policy (a curve below 1: some links never came back)")
+    ax.set_title("Time to link, per policy (a curve that stays below 1: links that never came back)")
     return save(fig, path)
 
 
