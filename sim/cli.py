@@ -191,7 +191,7 @@ def _cmd_sim_sweep(args: argparse.Namespace) -> int:
         return _usage_error(str(e))
     out = Path(args.out) if args.out else Path("out") / f"sweep-{Path(args.spec).stem}"
     from sim.campaign import sweep
-    from sim.campaign.executors import RayExecutor
+    from sim.campaign.executors import RayExecutor, SerialExecutor
     from vehicle.storage import StoredFileError
 
     try:
@@ -199,7 +199,9 @@ def _cmd_sim_sweep(args: argparse.Namespace) -> int:
     except StoredFileError as e:
         return _usage_error(str(e))
     try:
-        with RayExecutor(args.workers, args.address) as executor:
+        # a campaign already complete in DIR only rewrites its summary and report: no Ray to start
+        executor = RayExecutor(args.workers, args.address) if store.pending(spec.trials) else SerialExecutor()
+        with executor:
             done = sweep.run_sweep(spec, store, executor, progress=not args.quiet)
     except ConnectionError as e:
         return _usage_error(f"cannot join Ray at {args.address}: {e}")

@@ -328,3 +328,13 @@ def test_rows_store_nested_metrics_as_json_text(tmp_path):
     (back,) = pq.read_table(tmp_path / "trials.parquet").to_pylist()
     assert back["link_cycles"] == 2 and json.loads(back["blocks"]) == [{"index": 2, "reason": "COMPLETED"}]
     assert json.loads(back["loss_position"]) == [1.5, -2.0]
+
+
+def test_sweep_into_a_finished_campaign_runs_nothing_and_rewrites_the_report(jam_campaign, capsys):
+    out, trial, _ = jam_campaign
+    (out / "report.md").unlink()
+    before = pq.read_table(out / "trials.parquet").to_pylist()
+    assert main(["sim", "sweep", str(out.parent / "spec.toml"), "--out", str(out), "--quiet"]) == 0
+    assert "all 1 trials of" in capsys.readouterr().err
+    assert pq.read_table(out / "trials.parquet").to_pylist() == before
+    assert trial.id in (out / "report.md").read_text()

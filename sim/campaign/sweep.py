@@ -47,8 +47,12 @@ def run_sweep(spec: Spec, store: Store, executor, fn=run_trial, progress: bool =
     summary.csv and report.md. Ctrl-C keeps everything finished so far (the store is flushed on the way out)."""
     out = store.out
     todo = store.pending(spec.trials)
-    print(f"returnlink: {len(spec.trials)} trials in {spec.file}, {len(spec.trials) - len(todo)} already done in "
-          f"{out}, {len(todo)} to run on {executor.where} ({executor.workers} at a time)", file=sys.stderr)
+    done = len(spec.trials) - len(todo)
+    if todo:
+        print(f"returnlink: {len(spec.trials)} trials in {spec.file}, {done} already done in {out}, {len(todo)} to "
+              f"run on {executor.where}, {executor.workers} at a time", file=sys.stderr)
+    else:
+        print(f"returnlink: all {len(spec.trials)} trials of {spec.file} already done in {out}", file=sys.stderr)
     bar = Progress(len(todo)) if progress and todo else None
     try:
         for row in executor.map(todo, spec.timeout_s, fn):
