@@ -77,7 +77,11 @@ def _cmd_sim_run(args: argparse.Namespace) -> int:
     from sim import metrics, report
     from sim.runner import Run, write_metrics, write_tlog
 
-    sc = _scenario(args.scenario)
+    if args.replay:
+        return _cmd_sim_replay(args)
+    if args.scenario is None:
+        return _usage_error("sim run needs a SCENARIO (or --replay DIR TRIAL)")
+    sc = _run_overrides(_scenario(args.scenario), args)
     kind = args.vehicle or sc.vehicle
     seed = sc.seed if args.seed is None else args.seed
     out = Path(args.out) if args.out else Path("out") / f"{sc.name}-{kind}-{seed}"
@@ -87,8 +91,9 @@ def _cmd_sim_run(args: argparse.Namespace) -> int:
     run = Run(sc, kind, seed, progress=not args.quiet, policy=args.policy).run()
     m = run.metrics = metrics.compute(run)
     try:
-        paths = [write_metrics(m, out / "metrics.json"), write_tlog(run, out / "run.tlog"),
-                 report.trajectory(run, out / "trajectory.png"), report.timeline(run, out / "timeline.png")]
+        paths = [write_metrics(m, out / "metrics.json"), write_tlog(run, out / "run.tlog")]
+        if not args.no_plots:
+            paths += [report.trajectory(run, out / "trajectory.png"), report.timeline(run, out / "timeline.png")]
     except OSError as e:  # the directory was writable a moment ago: a full disk, a removed directory
         print(metrics.summary(run, m))
         raise _fail(f"cannot write the results to {out}: {e}") from None
@@ -109,6 +114,166 @@ def _epochs_file(args: argparse.Namespace):
         return Path(args.params).with_suffix(".epochs")
     base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
     return Path(base) / "returnlink" / "returnlink.epochs"
+
+
+def _usage_error(message: str) -> int:
+    print(f"returnlink: error: {message}", file=sys.stderr)
+    return 2
+
+
+def _param_assignment(text: str) -> tuple[str, float]:
+    """``NAME=VALUE`` for ``--param``, checked against the parameter table (name, number, range)."""
+    from vehicle.params import ParamError, validate
+
+    name, sep, value = text.partition("=")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"{text!r} is not NAME=VALUE")
+    try:
+        number = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: {value!r} is not a number") from None
+    try:
+        return name.strip(), validate(name.strip(), number)
+    except ParamError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def _plan_spec(text: str) -> tuple:
+    """``--plan 'rtl:50 | loiter:30 | launch'`` (the ``gcs`` plan syntax) as the scenario's return plan; every
+    item is checked against the one table of plan-item ranges (``link.plan_items``) on the way."""
+    from gcs.plans import PlanError, parse_spec
+    from vehicle.missions import Origin, to_plan
+
+    try:
+        return to_plan(tuple(parse_spec(text)), Origin())
+    except (PlanError, ValueError) as e:
+        raise argparse.ArgumentTypeError(f"--plan {text!r}: {e}") from None
+
+
+def _run_overrides(sc, args: argparse.Namespace):
+    """The scenario with ``--param`` values on top of its own and ``--plan`` instead of its return plan."""
+    from dataclasses import replace
+
+    if args.param:
+        sc = replace(sc, params={**sc.params, **dict(args.param)})
+    if args.plan is not None:
+        sc = replace(sc, plan=args.plan)
+    return sc
+
+
+def _cmd_sim_replay(args: argparse.Namespace) -> int:
+    """Run a stored campaign trial again from its parquet row's inputs; its metrics must come out the same."""
+    import json
+    from pathlib import Path
+
+    from sim import metrics, report
+    from sim.campaign.store import TRIALS_FILE, read_rows
+    from sim.campaign.trial import simulate, trial_from_row
+    from sim.runner import write_metrics, write_tlog
+    from vehicle.storage import StoredFileError
+
+    if args.scenario or args.param or args.plan is not None or args.seed is not None or args.vehicle:
+        return _usage_error("--replay takes every input from the stored trial; give no SCENARIO, --seed, "
+                            "--vehicle, --param or --plan with it")
+    directory, wanted = args.replay
+    path = Path(directory) / TRIALS_FILE
+    if not path.is_file():
+        return _usage_error(f"{path}: no such campaign file (run `returnlink sim sweep SPEC --out {directory}`)")
+    try:
+        rows = read_rows(path)
+    except StoredFileError as e:
+        return _usage_error(str(e))
+    found = [r for r in rows if r["trial_id"].startswith(wanted)] if wanted else []
+    if len(found) != 1:
+        return _usage_error(f"{path}: {'no' if not found else 'more than one'} trial {wanted!r}")
+    row = found[0]
+    trial = trial_from_row(row)
+    out = Path(args.out) if args.out else Path(directory) / "replay" / row["trial_id"]
+    print(f"returnlink: replaying trial {row['trial_id']}: {trial.scenario} with the {trial.vehicle} (seed "
+          f"{trial.seed}, policy {trial.policy}, params {row['params']})", file=sys.stderr)
+    try:
+        run = simulate(trial, progress=not args.quiet)
+    except Exception as e:  # noqa: BLE001 - an error row replayed: say what it raised, as the campaign did
+        print(f"returnlink: the trial raised {type(e).__name__}: {e} (stored: {row.get('error')})", file=sys.stderr)
+        return 1
+    m = run.metrics
+    paths = [write_metrics(m, out / "metrics.json"), write_tlog(run, out / "run.tlog")]
+    if not args.no_plots:
+        paths += [report.trajectory(run, out / "trajectory.png"), report.timeline(run, out / "timeline.png")]
+    print(metrics.summary(run, m))
+    print("  wrote " + ", ".join(str(p) for p in paths))
+    if row["status"] == "error":
+        print(f"returnlink: the stored row is an error ({row.get('error')}); nothing to compare", file=sys.stderr)
+        return 0 if m["passed"] else 1
+    stored = {k: (json.loads(v) if isinstance(v, str) and k in ("lease_events", "failures", "loss_position",
+                                                                "rest_position", "blocks") else v)
+              for k, v in row.items() if k in m}
+    fresh = json.loads(json.dumps({k: m[k] for k in stored}))
+    differ = [k for k in stored if k not in ("scenario", "vehicle", "seed", "policy", "real_time_factor")
+              and stored[k] != fresh[k]]
+    if differ:
+        print(f"returnlink: error: replay differs from the stored trial in {', '.join(differ)}", file=sys.stderr)
+        return 1
+    print("  metrics identical to the stored trial (real_time_factor aside)")
+    return 0 if m["passed"] else 1
+
+
+def _cmd_sim_sweep(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from sim.campaign.spec import SpecError, load_spec
+
+    if args.workers is not None and args.workers < 1:
+        return _usage_error(f"--workers must be at least 1, got {args.workers}")
+    if args.address and args.address != "auto":
+        host, _, port = args.address.rpartition(":")
+        if not host or not port.isdigit() or not 0 < int(port) < 65536:
+            return _usage_error(f"--address must be auto or HOST:PORT, got {args.address!r}")
+    try:
+        spec = load_spec(args.spec)
+    except SpecError as e:
+        return _usage_error(str(e))
+    out = Path(args.out) if args.out else Path("out") / f"sweep-{Path(args.spec).stem}"
+    from sim.campaign import sweep
+    from sim.campaign.executors import RayExecutor, SerialExecutor
+    from vehicle.storage import StoredFileError
+
+    try:
+        store = sweep.Store(out)
+    except StoredFileError as e:
+        return _usage_error(str(e))
+    try:
+        # a campaign already complete in DIR only rewrites its summary and report: no Ray to start
+        executor = RayExecutor(args.workers, args.address) if store.pending(spec.trials) else SerialExecutor()
+        with executor:
+            done = sweep.run_sweep(spec, store, executor, progress=not args.quiet)
+    except ConnectionError as e:
+        return _usage_error(f"cannot join Ray at {args.address}: {e}")
+    except KeyboardInterrupt:
+        print(f"returnlink: interrupted; finished trials are kept in {out} (run again to resume)", file=sys.stderr)
+        return 130
+    sweep.print_summary(done)
+    return 0
+
+
+def _add_sweep_parser(sim) -> None:
+    sw = sim.add_parser("sweep", help="a campaign: a grid of trials on Ray, with a summary and a report")
+    sw.add_argument("spec", help="campaign spec (.toml): scenarios, vehicles, seeds, params, policies, timeout_s")
+    sw.add_argument("--out", help="campaign directory (default: out/sweep-SPEC); running again resumes it")
+    sw.add_argument("--workers", type=int, help="trials at a time (default: every CPU of this machine or cluster)")
+    sw.add_argument("--address", help="join a Ray cluster: auto or HOST:PORT (default: a local Ray, started here)")
+    sw.add_argument("--quiet", action="store_true", help="no progress bar")
+    sw.set_defaults(func=_cmd_sim_sweep)
+
+
+def _add_run_campaign_options(run) -> None:
+    run.add_argument("--replay", nargs=2, metavar=("DIR", "TRIAL"),
+                     help="run a campaign's trial again from DIR/trials.parquet (a unique id prefix will do)")
+    run.add_argument("--param", type=_param_assignment, action="append", metavar="NAME=VALUE",
+                     help="set a vehicle parameter on top of the scenario's (repeatable)")
+    run.add_argument("--plan", type=_plan_spec, metavar="SPEC",
+                     help="return plan instead of the scenario's, e.g. 'rtl:50 | loiter:30 | launch'")
+    run.add_argument("--no-plots", action="store_true", help="skip trajectory.png and timeline.png")
 
 
 def _cmd_sim_serve(args: argparse.Namespace) -> int:
@@ -201,7 +366,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.set_defaults(func=_cmd_demo)
     sim = sub.add_parser("sim", help="the simulator").add_subparsers(dest="sim_command", required=True)
     run = sim.add_parser("run", help="run a scenario in lockstep, as fast as possible")
-    run.add_argument("scenario", help="a built-in scenario name or a .toml file")
+    run.add_argument("scenario", nargs="?", help="a built-in scenario name or a .toml file")
     run.add_argument("--seed", type=types.SEED, help="random seed (default: the scenario's)")
     run.add_argument("--vehicle", choices=["rover", "legged"], help="robot model (default: the scenario's)")
     run.add_argument("--out", help="output directory (default: out/SCENARIO-VEHICLE-SEED)")
@@ -209,7 +374,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--policy", choices=POLICY_NAMES, default=DEFAULT_POLICY,
                      help="what the vehicle does when its link is lost: the scenario's plan (returnlink) or a "
                           "baseline (DESIGN §9)")
+    _add_run_campaign_options(run)
     run.set_defaults(func=_cmd_sim_run)
+    _add_sweep_parser(sim)
     serve = sim.add_parser("serve", help="run a scenario in real time over UDP for MAVSDK, MAVProxy, QGC")
     serve.add_argument("scenario", help="a built-in scenario name or a .toml file")
     serve.add_argument("--vehicle", choices=["rover", "legged"], help="robot model (default: the scenario's)")

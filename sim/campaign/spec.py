@@ -1,0 +1,230 @@
+"""Campaign specs (TOML) -> the list of trials, checked whole before any trial runs.
+
+```toml
+scenarios = ["tunnel", "warehouse", "my_site.toml"]   # built-in names, or files relative to this spec
+vehicles = ["rover", "legged"]                        # default: each scenario's own robot
+seeds = {from = 1, to = 20}                           # or a list; both ends included
+policies = ["returnlink", "hold"]                     # default: ["returnlink"]
+timeout_s = 300                                       # wall-clock seconds per trial
+[params]                                              # a grid: every combination of these values
+LNK_TIMEOUT = [2.0, 5.0]
+```
+
+Trials are the cartesian product. A spec is written by hand and a campaign may run for hours, so every mistake is
+found up front and named by file, line and field, like a scenario file's (``SpecError``, exit code 2).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import re
+import sys
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from sim.campaign.trial import Trial
+from sim.policies import DEFAULT_POLICY, POLICY_NAMES
+from sim.scenario import BUILTIN, ScenarioError, parse
+from vehicle.params import BY_NAME, ParamError, validate
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+VEHICLES = ("rover", "legged")
+FIELDS = ("scenarios", "vehicles", "seeds", "params", "policies", "timeout_s")
+MAX_TRIALS = 1_000_000  # a typo such as seeds = {from = 1, to = 1e9} is refused before it fills a disk
+DEFAULT_TIMEOUT_S = 600.0
+
+
+class SpecError(ScenarioError):
+    """A campaign spec that cannot run: ``file:line: field: what`` (same shape as a scenario file's errors)."""
+
+
+@dataclass(frozen=True)
+class Spec:
+    file: str
+    trials: tuple[Trial, ...]
+    timeout_s: float
+
+
+class _Lines:
+    """Where a field of the spec was written: top-level ``key =``, or ``NAME =`` inside ``[params]``."""
+
+    def __init__(self, file: str, text: str) -> None:
+        self.file, self.lines = file, text.splitlines()
+
+    def _find(self, pattern: str, start: int = 0, stop: int | None = None) -> int | None:
+        rx = re.compile(pattern)
+        for i in range(start, len(self.lines) if stop is None else stop):
+            if rx.match(self.lines[i]):
+                return i
+        return None
+
+    def line_of(self, field: str) -> int | None:
+        top, _, sub = field.partition(".")
+        top = re.sub(r"\[\d+\]$", "", top)
+        first_table = self._find(r"^\s*\[")
+        key = self._find(rf"^\s*{re.escape(top)}\s*=", 0, first_table)
+        if not sub:
+            if key is None:
+                key = self._find(rf"^\s*\[\s*{re.escape(top)}\s*\]")
+            return None if key is None else key + 1
+        table = self._find(rf"^\s*\[\s*{re.escape(top)}\s*\]")
+        if table is not None:
+            name = re.sub(r"\[\d+\]$", "", sub)
+            hit = self._find(rf"^\s*{re.escape(name)}\s*=", table + 1, self._find(r"^\s*\[", table + 1))
+            return (hit if hit is not None else table) + 1
+        return None if key is None else key + 1
+
+    def fail(self, field: str, message: str) -> SpecError:
+        return SpecError(self.file, self.line_of(field), field, message)
+
+
+def _number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _strings(r: _Lines, raw: dict, key: str, default: list[str] | None) -> list[str]:
+    if key not in raw:
+        if default is None:
+            raise r.fail(key, "is required")
+        return default
+    v = raw[key]
+    if isinstance(v, str):
+        v = [v]
+    if not isinstance(v, list) or not v:
+        raise r.fail(key, f"must be a non-empty list of names, got {v!r}")
+    for k, s in enumerate(v):
+        if not isinstance(s, str):
+            raise r.fail(f"{key}[{k}]", f"must be a name, got {s!r}")
+    return v
+
+
+def _scenario_text(r: _Lines, spec_dir: Path, name: str, fld: str) -> tuple[str, str, str]:
+    """(name in the scenario, source as written, text) of a built-in scenario or a file next to the spec."""
+    if name in BUILTIN:
+        text = resources.files("sim.scenarios").joinpath(f"{name}.toml").read_text(encoding="utf-8")
+        source = f"{name}.toml"
+    else:
+        path = Path(name) if Path(name).is_absolute() else spec_dir / name
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as e:
+            raise r.fail(fld, f"cannot read scenario {name!r} ({path}): {e.__class__.__name__}: "
+                              f"{getattr(e, 'strerror', None) or e} (built-in: {', '.join(BUILTIN)})") from None
+        source = str(path)
+    try:
+        sc = parse(text, source)
+    except ScenarioError as e:
+        raise r.fail(fld, f"scenario {name!r} is broken: {e}") from None
+    return sc.name, source, text
+
+
+def _seeds(r: _Lines, raw: dict) -> list[int]:
+    v = raw.get("seeds")
+    if isinstance(v, dict):
+        extra = set(v) - {"from", "to"}
+        if extra:
+            raise r.fail("seeds", f"unknown key {sorted(extra)[0]!r} (a range is {{from = A, to = B}})")
+        for k in ("from", "to"):
+            if not isinstance(v.get(k), int) or isinstance(v.get(k), bool):
+                raise r.fail("seeds", f"{{from, to}} needs whole numbers, {k} is {v.get(k)!r}")
+        lo, hi = v["from"], v["to"]
+        if lo > hi:
+            raise r.fail("seeds", f"from {lo} is after to {hi}")
+        seeds = list(range(lo, hi + 1)) if hi - lo < MAX_TRIALS else None
+        if seeds is None:
+            raise r.fail("seeds", f"{hi - lo + 1} seeds is more than {MAX_TRIALS}")
+    elif isinstance(v, list) and v:
+        for k, s in enumerate(v):
+            if not isinstance(s, int) or isinstance(s, bool):
+                raise r.fail(f"seeds[{k}]", f"must be a whole number, got {s!r}")
+        seeds = list(dict.fromkeys(v))
+    else:
+        raise r.fail("seeds", f"must be a non-empty list or {{from = A, to = B}}, got {v!r}")
+    for s in seeds:
+        if not 0 <= s < 2**32:
+            raise r.fail("seeds", f"seed {s} outside 0..{2**32 - 1}")
+    return seeds
+
+
+def _params(r: _Lines, raw: dict) -> dict[str, list[float]]:
+    v = raw.get("params", {})
+    if not isinstance(v, dict):
+        raise r.fail("params", "must be a table: NAME = [values]")
+    grid: dict[str, list[float]] = {}
+    for name, values in v.items():
+        fld = f"params.{name}"
+        if name not in BY_NAME:
+            raise r.fail(fld, f"unknown parameter (known: {', '.join(BY_NAME)})")
+        values = values if isinstance(values, list) else [values]
+        if not values:
+            raise r.fail(fld, "needs at least one value")
+        checked = []
+        for x in values:
+            if not _number(x):
+                raise r.fail(fld, f"values must be finite numbers, got {x!r}")
+            try:
+                checked.append(validate(name, float(x)))
+            except ParamError as e:
+                raise r.fail(fld, str(e)) from None
+        grid[name] = list(dict.fromkeys(checked))
+    return grid
+
+
+def parse_spec(text: str, file: str = "<spec>", spec_dir: Path | None = None) -> Spec:
+    """The trials of a spec, or SpecError naming the first mistake."""
+    r = _Lines(file, text)
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        m = re.search(r"line (\d+)", str(e))
+        line = int(m.group(1)) if m else (max(1, len(r.lines)) if "end of document" in str(e) else None)
+        raise SpecError(file, line, "", f"not valid TOML: {e}") from None
+    for k in raw:
+        if k not in FIELDS:
+            raise r.fail(k, f"unknown field (expected one of {', '.join(FIELDS)})")
+    spec_dir = spec_dir if spec_dir is not None else Path(file).resolve().parent
+    names = _strings(r, raw, "scenarios", None)
+    scenarios = [_scenario_text(r, spec_dir, n, f"scenarios[{k}]") for k, n in enumerate(names)]
+    vehicles = _strings(r, raw, "vehicles", []) if "vehicles" in raw else None
+    for k, veh in enumerate(vehicles or []):
+        if veh not in VEHICLES:
+            raise r.fail(f"vehicles[{k}]", f"must be one of {', '.join(VEHICLES)}, got {veh!r}")
+    seeds = _seeds(r, raw) if "seeds" in raw else None
+    grid = _params(r, raw)
+    policies = _strings(r, raw, "policies", [DEFAULT_POLICY])
+    for k, p in enumerate(policies):
+        if p not in POLICY_NAMES:
+            raise r.fail(f"policies[{k}]", f"unknown policy {p!r} (known: {', '.join(POLICY_NAMES)})")
+    timeout = raw.get("timeout_s", DEFAULT_TIMEOUT_S)
+    if not _number(timeout) or timeout <= 0:
+        raise r.fail("timeout_s", f"must be a positive number of wall-clock seconds, got {timeout!r}")
+    combos = [tuple(zip(grid, values, strict=True)) for values in itertools.product(*grid.values())]
+    n = len(scenarios) * len(vehicles or [None]) * len(seeds or [None]) * len(combos) * len(policies)
+    if n > MAX_TRIALS:
+        raise r.fail("scenarios", f"the grid has {n} trials, more than {MAX_TRIALS}")
+    trials: dict[str, Trial] = {}
+    for name, source, text_ in scenarios:
+        own = parse(text_, source)
+        for veh in vehicles or [own.vehicle]:
+            for seed in seeds or [own.seed]:
+                for combo in combos:
+                    for policy in policies:
+                        t = Trial(name, source, text_, veh, seed, tuple(sorted(combo)), policy)
+                        trials.setdefault(t.id, t)
+    return Spec(file, tuple(trials.values()), float(timeout))
+
+
+def load_spec(path: str | Path) -> Spec:
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise SpecError(str(p), None, "", f"cannot read the spec: {getattr(e, 'strerror', None) or e}") from None
+    return parse_spec(text, str(p), p.resolve().parent)

@@ -1,0 +1,118 @@
+"""One trial: a scenario's content, a robot, a seed, parameter values and a link-loss policy, run to a row.
+
+The trial id is a hash of exactly those inputs (the scenario's text, not its file name), so a trial means the same
+thing on every machine, a renamed scenario file keeps its results, and an edited one gets new ids. ``run_trial`` is
+the function the workers call: no plots, no files, never raises: whatever goes wrong inside the simulation becomes
+a row with status ``error`` and the error text, because one broken trial must not end a campaign.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from dataclasses import dataclass, replace
+
+from sim.policies import DEFAULT_POLICY
+
+# the §7 keys added compatibly after the first set; read with .get() so a row has them whether or not the
+# metrics of this build compute them
+EXTRA_KEYS = ("policy", "loss_position", "rest_position", "rest_link_quality", "link_cycles", "regained_by",
+              "collisions_during_return", "return_speed_mps", "blocks")
+STATUSES = ("ok", "failed", "error")
+
+
+@dataclass(frozen=True)
+class Trial:
+    """The inputs of one trial. ``scenario`` is the scenario's own name, ``source`` what the spec said (a
+    built-in name or a path): both only for people; the id covers ``scenario_text`` instead."""
+
+    scenario: str
+    source: str
+    scenario_text: str
+    vehicle: str
+    seed: int
+    params: tuple[tuple[str, float], ...] = ()
+    policy: str = DEFAULT_POLICY
+
+    @property
+    def id(self) -> str:
+        return trial_id(self.scenario_text, self.vehicle, self.seed, dict(self.params), self.policy)
+
+
+def trial_id(scenario_text: str, vehicle: str, seed: int, params: dict[str, float], policy: str) -> str:
+    """A stable 16-hex-digit hash of a trial's inputs. Parameter values are hashed as floats, so 3 and 3.0 are
+    the same trial, and in name order, so the order a spec lists them in does not matter."""
+    canon = json.dumps({"scenario": scenario_text, "vehicle": vehicle, "seed": int(seed),
+                        "params": {k: float(v) for k, v in sorted(params.items())}, "policy": policy},
+                       sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(canon.encode("utf-8")).hexdigest()[:16]
+
+
+def scenario_of(trial: Trial):
+    """The scenario this trial flies: the stored text parsed again, with the trial's parameter values on top of
+    the scenario's own."""
+    from sim.scenario import parse
+
+    sc = parse(trial.scenario_text, trial.source)
+    return replace(sc, params={**sc.params, **dict(trial.params)}) if trial.params else sc
+
+
+def simulate(trial: Trial, progress: bool = False):
+    """Run the trial's simulation and compute its metrics: the ``Run`` (for plots) with ``run.metrics`` set."""
+    from sim import metrics
+    from sim.runner import Run
+
+    run = Run(scenario_of(trial), trial.vehicle, trial.seed, progress=progress, policy=trial.policy).run()
+    run.metrics = metrics.compute(run)
+    return run
+
+
+def inputs_row(trial: Trial) -> dict:
+    return {"trial_id": trial.id, "scenario": trial.scenario, "source": trial.source,
+            "scenario_text": trial.scenario_text, "vehicle": trial.vehicle, "seed": trial.seed,
+            "params": json.dumps(dict(trial.params), sort_keys=True), "policy": trial.policy}
+
+
+def error_row(trial: Trial, error: str, cpu_s: float | None = None) -> dict:
+    return {**inputs_row(trial), "status": "error", "error": error, "cpu_s": cpu_s}
+
+
+def run_trial(trial: Trial) -> dict:
+    """Inputs in, one row out: the inputs, every metric (§7 keys; missing ones absent), status and error text,
+    and the CPU seconds the trial took (for throughput figures, not for results)."""
+    c0 = time.process_time()
+    try:
+        run = simulate(trial)
+    except Exception as e:  # noqa: BLE001 - any failure of one trial is that trial's error row
+        return error_row(trial, f"{type(e).__name__}: {e}", time.process_time() - c0)
+    m = dict(run.metrics)
+    row = {**inputs_row(trial), **{k: v for k, v in m.items() if k not in ("scenario", "vehicle", "seed")}}
+    row["policy"] = trial.policy
+    row["status"] = "ok" if m.get("passed") else "failed"
+    row["error"] = None
+    row["cpu_s"] = time.process_time() - c0
+    return row
+
+
+def trial_from_row(row: dict) -> Trial:
+    """The trial a stored row was made from (the inverse of ``inputs_row``)."""
+    params = json.loads(row["params"]) if row.get("params") else {}
+    return Trial(row["scenario"], row["source"], row["scenario_text"], row["vehicle"], int(row["seed"]),
+                 tuple(sorted((k, float(v)) for k, v in params.items())), row["policy"])
+
+
+def same_metrics(a: dict, b: dict) -> list[str]:
+    """Names of the metrics that differ between two metric dicts (``real_time_factor`` is wall-clock and left
+    out); an empty list means the trial was reproduced exactly."""
+    out = []
+    for k in sorted(set(a) | set(b)):
+        if k == "real_time_factor":
+            continue
+        x, y = a.get(k), b.get(k)
+        if isinstance(x, float) and isinstance(y, float) and math.isnan(x) and math.isnan(y):
+            continue
+        if x != y:
+            out.append(k)
+    return out
