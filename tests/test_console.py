@@ -5,6 +5,7 @@ from __future__ import annotations
 import socket
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -32,21 +33,22 @@ def served():
         v.close()
 
 
-def test_shell_script_keeps_the_link_through_a_10_s_idle(served):
-    """acquire -> plan -> arm -> 10 s of nothing: a one-shot CLI let the vehicle run a return chain in such a gap;
-    the shell's background heartbeat keeps the owner heard, so no COMMS_LOST ever fires."""
-    script = "\n".join([
-        "# a mission script",
-        "acquire",
-        "plan upload --spec 'rtl:40 | loiter:10 | launch'",
-        "arm",
-        "wait 10",
-        "status",
-    ]) + "\n"
-    r = gcs("--url", f"udpin:127.0.0.1:{served.gcs_port}", "shell", stdin=script)
-    assert r.returncode == 0, r.stderr
-    assert "in control: epoch" in r.stdout and "uploaded 5 items" in r.stdout and "state TELEOP" in r.stdout
-    assert "return plan: 5 items, 3 leases" in r.stdout  # STATUSTEXTs are printed as they arrive
+def test_shell_keeps_the_link_through_a_10_s_idle(served):
+    """acquire -> plan -> arm -> 10 s of nobody typing: a one-shot CLI let the vehicle run a return chain in such a
+    gap; the shell's background thread keeps the owner heard while it waits for the next line, so no COMMS_LOST."""
+    proc = subprocess.Popen([sys.executable, "-m", "sim.cli", "gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}",
+                             "shell"], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        proc.stdin.write("# a mission script\nacquire\nplan upload --spec 'rtl:40 | loiter:10 | launch'\narm\n")
+        proc.stdin.flush()
+        wait_until(lambda: served.vehicle.armed, 20, "the script to arm the vehicle")
+        time.sleep(10)  # the operator thinks; the shell is blocked reading stdin
+        out, err = proc.communicate("status\n", timeout=20)
+    finally:
+        proc.kill() if proc.poll() is None else None
+    assert proc.returncode == 0, err
+    assert "in control: epoch" in out and "uploaded 5 items" in out and "state TELEOP" in out
+    assert "return plan: 5 items, 3 leases" in out  # STATUSTEXTs are printed as they arrive
     reasons = [e.reason for e in served.vehicle.event_log]
     assert ExpireReason.COMMS_LOST not in reasons
     assert served.vehicle.book.owner == 255 and served.vehicle.armed
