@@ -47,22 +47,38 @@ class MapStation:
         self.track = Track()
         self.session = Session(client, out)
         self.plan = "not downloaded"
+        self.plan_stale = True
+        self.plan_total: int | None = None
         self.rtl_max_disp: float | None = None
         client.gs.listeners.append(self._on_message)
 
     def _on_message(self, m, t: float) -> None:
-        if m.get_type() == "LOCAL_POSITION_NED":
+        kind = m.get_type()
+        if kind == "LOCAL_POSITION_NED":
             self.track.add(t, m.x, m.y)
+        elif kind == "MISSION_CURRENT" and m.total != self.plan_total:  # a plan uploaded or cleared by anyone
+            self.plan_total, self.plan_stale = m.total, True
+        elif kind == "STATUSTEXT":  # "return plan: ..." follows every accepted upload, same length or not
+            text = m.text if isinstance(m.text, str) else m.text.decode("utf-8", "replace")
+            if text.startswith("return plan:"):
+                self.plan_stale = True
+
+    def _refresh_plan(self) -> None:
+        """Download the return plan (standard mission protocol) when it may have changed."""
+        if not self.plan_stale:
+            return
+        self.plan_stale = False
+        try:
+            items = self.client.download()
+            self.plan = describe(items) if items else "default plan (one return to link)"
+        except GcsError as e:
+            self.plan = f"unknown ({e})"
 
     def start(self) -> None:
         """Start the link thread, then read what the map needs once: the plan and the displacement limit."""
         self.session.__enter__()
         with self.session.lock:
-            try:
-                items = self.client.download()
-                self.plan = describe(items) if items else "default plan (one return to link)"
-            except GcsError as e:
-                self.plan = f"unknown ({e})"
+            self._refresh_plan()
             try:
                 self.rtl_max_disp = self.client.param_get("RTL_MAX_DISP")
             except GcsError:
@@ -73,6 +89,7 @@ class MapStation:
 
     def snapshot(self) -> dict:
         with self.session.lock:
+            self._refresh_plan()
             c = self.client
             v = c.gs.vehicle
             st = v.status

@@ -12,6 +12,7 @@ import pytest
 
 from gcs.client import Client
 from gcs.mapserver import MapServer
+from gcs.plans import parse_spec
 from gcs.track import LOST_GAP, MAX_POINTS, MIN_STEP, Track, return_route
 from tests.interop import ServedVehicle, wait_until
 
@@ -86,10 +87,15 @@ def test_map_is_served_on_loopback_only_and_refuses_unknown_actions(mapped):
     state = json.loads(urllib.request.urlopen(server.url + "state", timeout=5).read())
     assert state["vehicle"] == 1 and state["lease"]["state"] == "NO_OWNER"
     assert state["plan"] == "default plan (one return to link)"  # from the mission download
+    with server.station.session.lock:
+        client.acquire()
+        client.upload(parse_spec("rtl:40 | loiter:10 | launch"))
+    wait_until(lambda: "RETURN_TO_LINK" in json.loads(urllib.request.urlopen(server.url + "state", timeout=5).read())
+               ["plan"], 5, "the new plan on the map")
     with pytest.raises(urllib.error.HTTPError) as e:
         urllib.request.urlopen(urllib.request.Request(server.url + "action/selfdestruct", method="POST"), timeout=5)
     assert e.value.code == 404
-    assert served.vehicle.book.owner is None  # nothing happened
+    assert served.vehicle.state() == 1  # TELEOP: the unknown action changed nothing
 
 
 def test_map_page_in_headless_chromium_shows_the_trail_grow_and_rtl(mapped, tmp_path):
