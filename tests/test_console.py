@@ -157,3 +157,22 @@ def test_one_shot_drive_needs_seconds(capsys):
     """A one-shot command's link ends when it returns: "drive until stopped" would be a lie there."""
     assert main(["gcs", "--url", f"udpin:127.0.0.1:{free_udp_port()}", "drive", "1", "0"]) == 2
     assert "give SECONDS" in capsys.readouterr().err
+
+
+def test_shell_prompt_completes_lists_and_survives_a_bad_line(capsys):
+    """At a terminal a bad line is a message, not the end of the session; names complete from the one table."""
+    import io
+
+    from gcs.shell import Session, Shell
+
+    with Client(f"udpin:127.0.0.1:{free_udp_port()}") as c, Session(c, io.StringIO()) as session:
+        shell = Shell(session, stdin=io.StringIO("fly away\nplan show --spec 'rtl:30 | launch'\nquit\n"))
+        shell.use_rawinput = False
+        assert shell.completenames("pa") == ["param"]
+        assert shell.completedefault("u", "plan u", 5, 6) == ["upload"]
+        shell.cmdloop()
+        out = session.out.getvalue()
+        assert "RETURN_TO_LINK" in out and "RETURN_TO_LAUNCH" in out  # the line after the bad one ran
+        shell.do_help("")
+        assert "plan upload" in session.out.getvalue() and "quit" in session.out.getvalue()
+    assert "invalid choice: 'fly'" in capsys.readouterr().err

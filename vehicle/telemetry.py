@@ -98,7 +98,8 @@ class Telemetry:
             self.due[mav.MAVLINK_MSG_ID_LEASE_STATUS] = t
             self.due[mav.MAVLINK_MSG_ID_MISSION_CURRENT] = t
             self.next_due = t
-        if (mode := self.custom_mode()) != self.last_mode:  # teleop or hold can change it with no lease change
+        mode = custom_mode(status_key[-1], v.holding)  # teleop or hold can change it with no lease change
+        if mode != self.last_mode:
             self.last_mode = mode
             self._current_mode(t)
         control_key = (v.book.owner, v.book.takeover_allowed)
