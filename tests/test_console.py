@@ -153,6 +153,11 @@ def test_bad_url_exits_2_with_a_message(url, capsys):
     assert "--url" in err and "udpin:HOST:PORT" in err
 
 
+def test_map_port_out_of_range_exits_2_before_connecting(capsys):
+    assert main(["gcs", "--url", f"udpin:127.0.0.1:{free_udp_port()}", "map", "--port", "99999"]) == 2
+    assert "--port 99999" in capsys.readouterr().err
+
+
 def test_one_shot_drive_needs_seconds(capsys):
     """A one-shot command's link ends when it returns: "drive until stopped" would be a lie there."""
     assert main(["gcs", "--url", f"udpin:127.0.0.1:{free_udp_port()}", "drive", "1", "0"]) == 2
