@@ -232,7 +232,7 @@ class Client:
         if name not in self.gs.vehicle.params:
             raise GcsError(f"unknown parameter {name!r}: the vehicle has no parameter of that name")
         got = self.gs.vehicle.params[name]
-        if abs(got - value) > 1e-6 * max(1.0, abs(value)):
+        if not abs(got - value) <= 1e-6 * max(1.0, abs(value)):  # NaN never matches: a refusal, not a success
             raise GcsError(f"{name} refused, still {got:g}" + (f" ({r})" if (r := self._last_refusal()) else ""))
         return got
 

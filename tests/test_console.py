@@ -111,6 +111,13 @@ def test_unknown_parameter_is_named_not_a_time_out(served, capsys):
     assert "unknown parameter 'NO_SUCH_PARAM'" in capsys.readouterr().err
 
 
+def test_param_set_to_nan_is_reported_refused_not_done(served, capsys):
+    url = ["gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}"]
+    assert main([*url, "param", "set", "LNK_TIMEOUT", "nan"]) == 1
+    assert "LNK_TIMEOUT refused, still 3" in capsys.readouterr().err
+    assert served.vehicle.params["LNK_TIMEOUT"] == 3.0
+
+
 def test_connect_waits_for_the_heartbeat_not_just_any_message():
     """A LEASE_STATUS alone is not a vehicle: ``status`` must not print "vehicle 0, armed no"."""
     port = free_udp_port()
