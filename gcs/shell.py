@@ -465,7 +465,12 @@ class Shell(cmd.Cmd):
         self.parser = line_parser()
 
     def default(self, line: str) -> bool:
-        self.session.run_line(line, self.parser)
+        try:
+            self.session.run_line(line, self.parser)
+        except KeyboardInterrupt:  # Ctrl-C ends the command (a long `wait`, `watch`), not the session
+            with self.session.lock:
+                self.session.client.gs.stop_streaming()
+            print("\ninterrupted", file=self.session.out)
         return False
 
     def emptyline(self) -> bool:
@@ -535,4 +540,8 @@ def run_shell(client: Client, stdin: TextIO = sys.stdin, out: TextIO = sys.stdou
             except KeyboardInterrupt:
                 print(file=out)
             return 0
-        return run_script(session, stdin)
+        try:
+            return run_script(session, stdin)
+        except KeyboardInterrupt:
+            print("returnlink gcs shell: interrupted", file=sys.stderr)
+            return 130
