@@ -58,7 +58,6 @@ class Command:
     check: Callable[[argparse.Namespace, bool], None] = lambda a, session: None  # UsageError before any link
 
 
-
 # ----- plans and reports (no socket) ----------------------------------------------------------------------------
 def plan_items(a: argparse.Namespace) -> list:
     """The items of ``--spec`` or a plan FILE; UsageError names the problem (exit code 2)."""
@@ -281,10 +280,6 @@ def _param_load(ctx, a):
 
 def _param_save(ctx, a):
     _say(ctx, f"saved {ctx.client.param_save(Path(a.file))} parameters to {a.file}")
-
-
-def _no_run(ctx, a):  # shell and map are run by gcs/cli.py: they open their own session
-    raise UsageError("not available here")
 
 
 def _args(*specs: tuple[tuple, dict]) -> Callable[[argparse.ArgumentParser], None]:
