@@ -1,8 +1,8 @@
 """``returnlink gcs ...``: the ground station from a shell. Every failure prints what went wrong and exits 1
 (2 for bad arguments or files).
 
-The commands themselves are the table in ``gcs/shell.py``; this module adds the connection options, the long-lived
-``shell`` and ``map`` sessions, and the one-shot run: connect, run one command from the table, leave.
+The commands themselves are the table in ``gcs/commands.py``; this module adds the connection options, the
+long-lived ``shell`` and ``map`` sessions, and the one-shot run: connect, run one command from the table, leave.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import argparse
 import os
 import sys
 
-from gcs.shell import Context, UsageError, add_commands, execute, find, status_text  # noqa: F401 - status_text
+from gcs.commands import Context, UsageError, add_commands, execute, find, status_text  # noqa: F401 - status_text
 
 
 def add_parser(sub) -> None:

@@ -10,7 +10,7 @@ import time
 import pytest
 
 from gcs.client import Client, GcsError
-from gcs.shell import COMMANDS
+from gcs.commands import COMMANDS
 from link import dialect
 from sim.cli import main
 from tests.interop import ServedVehicle, free_udp_port, wait_until
