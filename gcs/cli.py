@@ -38,8 +38,22 @@ def _open_client(args: argparse.Namespace):
         parse_url(args.url)
     except GcsError as e:
         raise UsageError(f"--url: {e}") from None
-    extra = {"key": args.key} if getattr(args, "key", None) is not None else {}
-    return Client(args.url, args.sysid, target=args.target, **extra)
+    key = _signing_key(args)
+    return Client(args.url, args.sysid, target=args.target, **({"key": key} if key is not None else {}))
+
+
+def _signing_key(args: argparse.Namespace):
+    """The key of ``--key FILE`` where that option exists (DESIGN §4.1); a damaged or missing file is a usage
+    error naming the file and line, reported before any link opens."""
+    path = getattr(args, "key", None)
+    if not path:
+        return None
+    from link.signing import KeyFileError, load_key
+
+    try:
+        return load_key(path)
+    except KeyFileError as e:
+        raise UsageError(f"key file {e}") from None
 
 
 def _quiet_broken_pipe() -> int:
