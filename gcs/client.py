@@ -96,9 +96,11 @@ class Client:
 
     # ----- connection and status -----------------------------------------------------------------------------
     def connect(self, timeout: float = 10.0) -> None:
+        """Wait for the vehicle's HEARTBEAT (who it is, armed or not) and its LEASE_STATUS: a report printed
+        before both have arrived would show an anonymous, disarmed vehicle that does not exist."""
         self.gs.t = self.now
         try:
-            self.wait_for(lambda: self.gs.vehicle.last_heard is not None and self.gs.vehicle.status is not None,
+            self.wait_for(lambda: self.gs.vehicle.sysid != 0 and self.gs.vehicle.status is not None,
                           timeout, "a returnlink vehicle (HEARTBEAT and LEASE_STATUS)")
         except GcsError as e:
             refused = sum(self.gs.refused.values())
@@ -107,6 +109,15 @@ class Client:
                 why = f"{refused} frames from the vehicle were not signed with this key ({kinds})"
                 raise GcsError(f"{e}; {why}") from None
             raise
+
+    def text_since(self, t: float, *needles: str) -> str | None:
+        """The newest STATUSTEXT received at or after ``t`` that contains every needle."""
+        for at, text in reversed(self.gs.texts):
+            if at < t:
+                return None
+            if all(n in text for n in needles):
+                return text
+        return None
 
     def call(self, pending: Pending, timeout: float = 6.0, what: str = "") -> Pending:
         self.wait_for(lambda: pending.done, timeout, f"an answer to {what or pending.command}")
@@ -147,18 +158,43 @@ class Client:
 
     # ----- driving -------------------------------------------------------------------------------------------
     def drive_velocity(self, vn: float, ve: float, seconds: float) -> None:
+        """Stream a NED velocity for ``seconds``, then stop; GcsError when the vehicle refused the setpoints."""
+        since = self.now
         self.gs.drive_velocity(vn, ve)
         self.pump(seconds)
-        self.gs.stop()
+        self.stop_driving()
+        self.check_teleop(since)
+
+    def drive_manual(self, x: float, r: float, seconds: float) -> None:
+        """MANUAL_CONTROL-style: forward ``x`` and turn ``r``, each -1..1 of the vehicle's maximum."""
+        since = self.now
+        self.gs.drive_manual(x, r)
+        self.pump(seconds)
+        self.stop_driving()
+        self.check_teleop(since)
+
+    def stop_driving(self) -> None:
+        """A zero setpoint for a moment (so the vehicle stops now, not at its teleop time-out), then silence."""
+        kind = self.gs.teleop[0] if self.gs.teleop else "velocity"
+        if kind == "manual":
+            self.gs.drive_manual(0.0, 0.0)
+        else:
+            self.gs.stop()
         self.pump(0.3)
         self.gs.stop_streaming()
 
-    def drive_manual(self, x: float, r: float, seconds: float) -> None:
-        self.gs.drive_manual(x, r)
-        self.pump(seconds)
-        self.gs.drive_manual(0.0, 0.0)
-        self.pump(0.3)
-        self.gs.stop_streaming()
+    def check_teleop(self, since: float) -> None:
+        """Teleop setpoints are a stream without acknowledgements: the vehicle refuses them with a rate-limited
+        STATUSTEXT. Raise GcsError naming the refusal (and the way out when the lease awaits a claim)."""
+        self.pump(0.2)
+        text = self.text_since(since, f"teleop from {self.gs.sysid} refused")
+        if text is None:
+            return
+        st = self.gs.vehicle.status
+        hint = ""
+        if st is not None and st.state_name == "AWAITING_CLAIM":
+            hint = f"; the vehicle is AWAITING_CLAIM: run `claim` to take lease [{st.epoch},{st.current}] first"
+        raise GcsError(f"drive refused: {text}{hint}")
 
     # ----- plans ---------------------------------------------------------------------------------------------
     def _transfer(self, tr: Transfer, timeout: float, what: str) -> Transfer:
@@ -181,25 +217,37 @@ class Client:
 
     # ----- parameters ----------------------------------------------------------------------------------------
     def param_get(self, name: str, timeout: float = 3.0) -> float:
+        since = self.now
         self.gs.vehicle.params.pop(name, None)
         self.gs.param_request(name)
-        self.wait_for(lambda: name in self.gs.vehicle.params, timeout, f"parameter {name}")
+        self.wait_for(lambda: name in self.gs.vehicle.params or self._unknown_param(since, name), timeout,
+                      f"parameter {name}")
+        if name not in self.gs.vehicle.params:
+            raise GcsError(f"unknown parameter {name!r}: the vehicle has no parameter of that name")
         return self.gs.vehicle.params[name]
+
+    def _unknown_param(self, since: float, name: str) -> bool:
+        """The vehicle answers a read or set of a name it does not have with STATUSTEXT "no parameter 'NAME'"."""
+        return self.text_since(since, f"no parameter {name!r}") is not None
 
     def param_set(self, name: str, value: float, timeout: float = 3.0) -> float:
         """Set and confirm: the vehicle echoes the stored value, which is the old one if it refused."""
+        since = self.now
         for _ in range(3):
             self.gs.vehicle.params.pop(name, None)
             self.gs.param_set(name, value)
             try:
-                self.wait_for(lambda: name in self.gs.vehicle.params, timeout / 3, f"parameter {name}")
+                self.wait_for(lambda: name in self.gs.vehicle.params or self._unknown_param(since, name),
+                              timeout / 3, f"parameter {name}")
                 break
             except GcsError:
                 continue
         else:
             raise GcsError(f"no answer setting {name}")
+        if name not in self.gs.vehicle.params:
+            raise GcsError(f"unknown parameter {name!r}: the vehicle has no parameter of that name")
         got = self.gs.vehicle.params[name]
-        if abs(got - value) > 1e-6 * max(1.0, abs(value)):
+        if not abs(got - value) <= 1e-6 * max(1.0, abs(value)):  # NaN never matches: a refusal, not a success
             raise GcsError(f"{name} refused, still {got:g}" + (f" ({r})" if (r := self._last_refusal()) else ""))
         return got
 

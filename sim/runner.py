@@ -37,6 +37,9 @@ from vehicle.app import DT
 from vehicle.lease import Holder
 
 COMMAND_NAMES = {num: name for name, num in PLAN_COMMANDS.items()}
+# A lockstep run has no wall-clock time of its own: its .tlog is stamped from 2026-01-01 00:00:00 UTC + sim time
+# (1970, the UNIX epoch itself, made MAVProxy and QGroundControl show a log from before MAVLink existed).
+TLOG_EPOCH_US = 1_767_225_600 * 1_000_000
 
 
 @dataclass
@@ -216,7 +219,7 @@ class Run:
         self._log_frame(data, t)
 
     def _log_frame(self, data: bytes, t: float) -> None:
-        self.tlog.append(struct.pack(">Q", int(t * 1e6)) + data)
+        self.tlog.append(struct.pack(">Q", TLOG_EPOCH_US + int(t * 1e6)) + data)
 
     # ----- timed events --------------------------------------------------------------------------------------
     def _events(self, t: float) -> None:
@@ -350,6 +353,9 @@ class Run:
 
 
 def write_tlog(run: Run, path: Path) -> Path:
+    """The operator station's traffic as a .tlog: each frame after its big-endian µs UNIX time, here the fixed
+    epoch ``TLOG_EPOCH_US`` plus simulated time, so replay tools show a real date and the same run gives the same
+    bytes."""
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(b"".join(run.tlog))
     return path

@@ -72,6 +72,8 @@ def test_gcs_commands_against_a_served_vehicle(tmp_path, capsys):
     try:
         assert main([*url, "acquire"]) == 0
         assert "in control: epoch" in capsys.readouterr().out
+        # one-shot commands leave the owner silent between them (`gcs shell` keeps the link): give the gaps room
+        assert main([*url, "param", "set", "LNK_TIMEOUT", "30"]) == 0
         assert main([*url, "plan", "upload", "--spec", "rtl:40 | loiter:10 | launch"]) == 0
         plan = tmp_path / "plan.txt"
         assert main([*url, "plan", "download", str(plan)]) == 0

@@ -9,6 +9,7 @@ and ``tick(t) -> [frames]`` are called by whatever loop drives the vehicle.
 from __future__ import annotations
 
 import math
+import struct
 from collections import Counter
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
@@ -40,12 +41,16 @@ from vehicle.modes import decode_mode
 from vehicle.params import SPECS, ParamError, save_parm
 from vehicle.retries import RetryWindow, command_key
 from vehicle.service import PlanItem
-from vehicle.telemetry import Telemetry, wire_index
+from vehicle.telemetry import MSG_ID_AVAILABLE_MODES, Telemetry, wire_index
 
 mav = dialect.load()
 
 RETRY_WINDOW = 3.0  # s: an identical command from the same sender within this is a retry or a late copy
 REJECT_NOTICE_GAP = 2.0  # s between STATUSTEXTs about a rejected stream (MANUAL_CONTROL, velocity targets)
+
+# MAVLink FTP (FILE_TRANSFER_PROTOCOL payload): this vehicle has no file server; it says so at once
+FTP_OP_NAK, FTP_ERR_UNKNOWN_COMMAND = 129, 7
+FTP_HEADER = struct.Struct("<HBBBBBBI")  # seq, session, opcode, size, req_opcode, burst_complete, padding, offset
 
 REJECT_RESULT = {
     RejectReason.NOT_IN_CONTROL: mav.MAV_RESULT_NOT_IN_CONTROL,
@@ -351,6 +356,10 @@ class Endpoint:
     def _cmd_request_message(self, p, sender, scomp, t):
         """One message, once: a read, answered to anyone (it starts no stream here)."""
         msgid = int(p[0])
+        if msgid == MSG_ID_AVAILABLE_MODES:  # param2: 0 every mode, else the 1-based index of one
+            index = _whole(p[1])
+            ok = index is not None and self.telemetry.available_modes(index)
+            return (mav.MAV_RESULT_ACCEPTED if ok else mav.MAV_RESULT_DENIED), 0
         if not self.telemetry.emit(msgid, t):
             return mav.MAV_RESULT_DENIED, 0
         return mav.MAV_RESULT_ACCEPTED, 0
@@ -452,6 +461,19 @@ class Endpoint:
         else:
             mode = decode_mode(m.base_mode, custom, 0)
         self._mode(mode, sender, scomp, t)
+
+    def _on_file_transfer_protocol(self, m, sender, scomp, t):
+        """Any FTP request gets a NAK (unknown command): ground stations that try FTP first (MAVProxy fetches
+        parameters with it) fall back to the parameter protocol at once instead of after their time-out."""
+        payload = bytes(m.payload)
+        if len(payload) < FTP_HEADER.size:
+            return
+        seq, session, opcode = FTP_HEADER.unpack_from(payload)[:3]
+        if opcode >= 128:
+            return  # an ACK or NAK itself: never answer an answer
+        nak = FTP_HEADER.pack((seq + 1) & 0xFFFF, session, FTP_OP_NAK, 1, opcode, 0, 0, 0) + bytes(
+            [FTP_ERR_UNKNOWN_COMMAND])
+        self.mav.file_transfer_protocol_send(0, sender, scomp, nak + bytes(251 - len(nak)))
 
     # ----- missions -----------------------------------------------------------------------------------------
     def _mission_allowed(self, sender: int, scomp: int, mission_type: int, t: float) -> tuple[int, str]:

@@ -7,6 +7,8 @@ DO_SET_MODE / SET_MODE in both encodings, so MAVSDK's ``return_to_launch()`` and
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from vehicle.app import State
 
 CUSTOM_MODE_ENABLED = 1  # MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
@@ -43,3 +45,34 @@ def decode_mode(base: int, custom: int, sub: int) -> str | None:
     if custom in (AP_RTL, AP_SMART_RTL, AP_AUTO):
         return "RTL"
     return None
+
+
+# ----- the standard modes microservice (AVAILABLE_MODES / CURRENT_MODE, MAVLink development.xml) -------------------
+# Ground stations that know the microservice (QGroundControl, recent MAVProxy and MAVSDK) list and name the modes
+# from these answers instead of guessing from the autopilot type, so the vehicle can stay MAV_AUTOPILOT_GENERIC
+# with PX4-encoded custom modes without claiming to be PX4. Standard modes carry no name (the ground station names
+# them); the one mode with no standard equivalent, teleoperation under the operator lease, is named.
+STANDARD_NON_STANDARD, STANDARD_POSITION_HOLD, STANDARD_SAFE_RECOVERY, STANDARD_MISSION = 0, 1, 5, 6
+
+
+@dataclass(frozen=True)
+class ModeInfo:
+    standard: int  # MAV_STANDARD_MODE
+    custom: int  # the heartbeat's custom_mode while in this mode
+    name: str  # empty for standard modes
+
+
+AVAILABLE_MODES: tuple[ModeInfo, ...] = (
+    ModeInfo(STANDARD_NON_STANDARD, PX4_POSCTL << 16, "TELEOP"),
+    ModeInfo(STANDARD_POSITION_HOLD, (PX4_AUTO << 16) | (PX4_AUTO_LOITER << 24), ""),
+    ModeInfo(STANDARD_SAFE_RECOVERY, (PX4_AUTO << 16) | (PX4_AUTO_RTL << 24), ""),
+    ModeInfo(STANDARD_MISSION, (PX4_AUTO << 16) | (PX4_AUTO_MISSION << 24), ""),
+)
+
+
+def standard_mode(custom: int) -> int:
+    """The MAV_STANDARD_MODE of a heartbeat custom_mode (NON_STANDARD when none fits)."""
+    for m in AVAILABLE_MODES:
+        if m.custom == custom:
+            return m.standard
+    return STANDARD_NON_STANDARD

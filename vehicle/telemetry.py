@@ -13,9 +13,16 @@ from link import dialect
 from vehicle.app import State, Vehicle
 from vehicle.lease import Holder
 from vehicle.missions import Origin
-from vehicle.modes import custom_mode
+from vehicle.modes import AVAILABLE_MODES, custom_mode, standard_mode
 
 mav = dialect.load()
+# AVAILABLE_MODES (435) and CURRENT_MODE (436) are standard messages of MAVLink's development.xml, which the
+# returnlink dialect (common.xml + lease messages) does not include: they are encoded with pymavlink's own
+# development module, so the dialect contract stays unchanged.
+from pymavlink.dialects.v20 import development as _modes_wire  # noqa: E402
+
+MSG_ID_AVAILABLE_MODES = _modes_wire.MAVLINK_MSG_ID_AVAILABLE_MODES
+MSG_ID_CURRENT_MODE = _modes_wire.MAVLINK_MSG_ID_CURRENT_MODE
 
 NO_INDEX = 65535
 HEALTH_SENSORS = (mav.MAV_SYS_STATUS_SENSOR_3D_GYRO | mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL
@@ -59,6 +66,7 @@ class Telemetry:
         self.next_heartbeat = boot_t
         self.last_status_key: tuple | None = None
         self.last_control_key: tuple | None = None
+        self.last_mode: int | None = None
 
     def boot_ms(self, t: float) -> int:
         return int(max(0.0, t - self.boot_t) * 1000) & 0xFFFFFFFF
@@ -90,6 +98,10 @@ class Telemetry:
             self.due[mav.MAVLINK_MSG_ID_LEASE_STATUS] = t
             self.due[mav.MAVLINK_MSG_ID_MISSION_CURRENT] = t
             self.next_due = t
+        mode = custom_mode(status_key[-1], v.holding)  # teleop or hold can change it with no lease change
+        if mode != self.last_mode:
+            self.last_mode = mode
+            self._current_mode(t)
         control_key = (v.book.owner, v.book.takeover_allowed)
         if control_key != self.last_control_key:
             self.last_control_key = control_key
@@ -208,6 +220,22 @@ class Telemetry:
             else (mav.MISSION_STATE_NOT_STARTED if total else mav.MISSION_STATE_NO_MISSION)
         self.mav.mission_current_send(max(0, seq), total, state)
 
+    def _current_mode(self, t: float) -> None:
+        """CURRENT_MODE: sent on every mode change and on request (standard modes microservice)."""
+        mode = self.custom_mode()
+        self.mav.send(_modes_wire.MAVLink_current_mode_message(standard_mode(mode), mode, 0))
+
+    def available_modes(self, index: int) -> bool:
+        """AVAILABLE_MODES for mode ``index`` (1-based), or every mode for 0; False for an index out of range."""
+        n = len(AVAILABLE_MODES)
+        if not 0 <= index <= n:
+            return False
+        for k in range(1, n + 1) if index == 0 else (index,):
+            m = AVAILABLE_MODES[k - 1]
+            self.mav.send(_modes_wire.MAVLink_available_modes_message(n, k, m.standard, m.custom, 0,
+                                                                      m.name.encode()))
+        return True
+
     def _control_status(self, t: float) -> None:
         b = self.vehicle.book
         flags = mav.GCS_CONTROL_STATUS_FLAGS_SYSTEM_MANAGER
@@ -248,6 +276,7 @@ BUILDERS: dict[int, Callable[[Telemetry, float], None]] = {
     mav.MAVLINK_MSG_ID_CONTROL_STATUS: Telemetry._control_status,
     mav.MAVLINK_MSG_ID_LEASE_STATUS: Telemetry._lease_status,
     mav.MAVLINK_MSG_ID_HEARTBEAT: Telemetry._heartbeat,
+    MSG_ID_CURRENT_MODE: Telemetry._current_mode,
 }
 
 

@@ -1,0 +1,200 @@
+"""The operator's console: the long-lived shell, one-shot commands that never lie about what happened."""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import time
+
+import pytest
+
+from gcs.client import Client, GcsError
+from gcs.commands import COMMANDS
+from link import dialect
+from sim.cli import main
+from tests.interop import ServedVehicle, free_udp_port, wait_until
+from vehicle.lease import ExpireReason
+
+mav = dialect.load()
+
+
+def gcs(*args: str, stdin: str | None = None, timeout: float = 40) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "sim.cli", "gcs", *args], input=stdin, capture_output=True,
+                          text=True, timeout=timeout)
+
+
+@pytest.fixture
+def served():
+    v = ServedVehicle("tunnel")
+    try:
+        yield v
+    finally:
+        v.close()
+
+
+def test_shell_keeps_the_link_through_a_10_s_idle(served):
+    """acquire -> plan -> arm -> 10 s of nobody typing: a one-shot CLI let the vehicle run a return chain in such a
+    gap; the shell's background thread keeps the owner heard while it waits for the next line, so no COMMS_LOST."""
+    proc = subprocess.Popen([sys.executable, "-m", "sim.cli", "gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}",
+                             "shell"], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        proc.stdin.write("# a mission script\nacquire\nplan upload --spec 'rtl:40 | loiter:10 | launch'\narm\n")
+        proc.stdin.flush()
+        wait_until(lambda: served.vehicle.armed, 20, "the script to arm the vehicle")
+        time.sleep(10)  # the operator thinks; the shell is blocked reading stdin
+        out, err = proc.communicate("status\n", timeout=20)
+    finally:
+        proc.kill() if proc.poll() is None else None
+    assert proc.returncode == 0, err
+    assert "in control: epoch" in out and "uploaded 5 items" in out and "state TELEOP" in out
+    assert "return plan: 5 items, 3 leases" in out  # STATUSTEXTs are printed as they arrive
+    reasons = [e.reason for e in served.vehicle.event_log]
+    assert ExpireReason.COMMS_LOST not in reasons
+    assert served.vehicle.book.owner == 255 and served.vehicle.armed
+
+
+def test_shell_script_stops_at_the_first_refused_command(served):
+    script = "acquire\nparam set LNK_TIMEOUT 999\nrtl\n"
+    r = gcs("--url", f"udpin:127.0.0.1:{served.gcs_port}", "shell", stdin=script)
+    assert r.returncode == 1
+    assert "LNK_TIMEOUT refused" in r.stderr and "line 2" in r.stderr
+    assert "> rtl" not in r.stdout  # nothing after the refusal ran
+    assert served.vehicle.state() != 3  # not RETURNING
+
+
+def test_shell_script_rejects_an_unknown_command_with_exit_2(served):
+    r = gcs("--url", f"udpin:127.0.0.1:{served.gcs_port}", "shell", stdin="status\nfly away\n")
+    assert r.returncode == 2 and "invalid choice" in r.stderr
+
+
+def test_shell_drives_until_stopped_with_forward_speed_and_turn_rate(served):
+    script = "acquire\narm\nmanual 0.5 0\nwait 2\nstop\nstatus\n"
+    r = gcs("--url", f"udpin:127.0.0.1:{served.gcs_port}", "shell", stdin=script)
+    assert r.returncode == 0, r.stderr
+    assert "driving (`stop` to stop)" in r.stdout and "stopped" in r.stdout
+    assert served.vehicle.trail.count >= 2  # it moved: crumbs every TRL_SPACING
+
+
+def test_one_shot_and_shell_share_one_command_table():
+    from sim.cli import build_parser
+
+    parser = build_parser()
+    for c in COMMANDS:
+        if c.where == "shell":
+            continue
+        words = c.path.split() + {"drive": ["1", "0", "1"], "manual": ["0.5", "0", "1"], "claim": [],
+                                  "param set": ["LNK_TIMEOUT", "5"], "param load": ["f"], "param save": ["f"],
+                                  "wait": ["1"]}.get(c.path, [])
+        assert parser.parse_args(["gcs", *words]).command_path == c.path
+
+
+def test_drive_refused_while_awaiting_claim_exits_1_and_says_claim(served, capsys):
+    url = ["gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}"]
+    assert main([*url, "acquire"]) == 0
+    assert main([*url, "rtl"]) == 0  # a commanded return over a good link: it ends, the lease awaits a claim
+    wait_until(lambda: served.vehicle.state() == 2, 15, "AWAITING_CLAIM")
+    capsys.readouterr()
+    assert main([*url, "drive", "0.5", "0", "1"]) == 1
+    err = capsys.readouterr().err
+    assert "drive refused" in err and "AWAITING_CLAIM" in err and "claim" in err
+    assert main([*url, "claim"]) == 0
+    assert main([*url, "drive", "0.5", "0", "1"]) == 0
+
+
+def test_unknown_parameter_is_named_not_a_time_out(served, capsys):
+    url = ["gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}"]
+    assert main([*url, "param", "get", "NO_SUCH_PARAM"]) == 1
+    err = capsys.readouterr().err
+    assert "unknown parameter 'NO_SUCH_PARAM'" in err and "timed out" not in err
+    assert main([*url, "param", "set", "NO_SUCH_PARAM", "1"]) == 1
+    assert "unknown parameter 'NO_SUCH_PARAM'" in capsys.readouterr().err
+
+
+def test_param_set_to_nan_is_reported_refused_not_done(served, capsys):
+    """The command line refuses NaN as a bad argument (exit 2); a library caller that sends it anyway is told the
+    vehicle refused it, never that it was set (NaN compares unequal to the echoed old value)."""
+    url = ["gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}"]
+    with pytest.raises(SystemExit) as e:
+        main([*url, "param", "set", "LNK_TIMEOUT", "nan"])
+    assert e.value.code == 2 and "finite" in capsys.readouterr().err
+    with Client(f"udpin:127.0.0.1:{served.gcs_port}") as c:
+        c.connect(10.0)
+        with pytest.raises(GcsError, match="LNK_TIMEOUT refused, still 3"):
+            c.param_set("LNK_TIMEOUT", float("nan"))
+    assert served.vehicle.params["LNK_TIMEOUT"] == 3.0
+
+
+def test_connect_waits_for_the_heartbeat_not_just_any_message():
+    """A LEASE_STATUS alone is not a vehicle: ``status`` must not print "vehicle 0, armed no"."""
+    port = free_udp_port()
+    enc = mav.MAVLink(None, 1, 1)
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    nan = float("nan")
+    frame = enc.lease_status_encode(0, 7, 0, 0, 65535, 65535, 0, 0, 0, 0, 0, 0xFFFFFFFF, nan, nan, nan, nan, 0.0, nan,
+                                    0.0, 0).pack(enc)
+    with Client(f"udpin:127.0.0.1:{port}") as c:
+        for _ in range(5):
+            sock.sendto(frame, ("127.0.0.1", port))
+        with pytest.raises(GcsError, match="HEARTBEAT"):
+            c.connect(0.5)
+        assert c.gs.vehicle.status is not None  # the LEASE_STATUS did arrive; it was not enough
+        hb = enc.heartbeat_encode(mav.MAV_TYPE_GROUND_ROVER, mav.MAV_AUTOPILOT_GENERIC, 1, 0, 0).pack(enc)
+        sock.sendto(hb, ("127.0.0.1", port))
+        c.connect(1.0)
+        assert c.gs.vehicle.sysid == 1
+    sock.close()
+
+
+def test_status_reports_the_vehicle(served, capsys):
+    assert main(["gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}", "status"]) == 0
+    assert capsys.readouterr().out.startswith("vehicle 1  ")
+
+
+def test_closed_stdout_ends_quietly(served):
+    proc = subprocess.Popen([sys.executable, "-m", "sim.cli", "gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}",
+                             "param", "get"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()  # the reader is gone before anything is written, like `| head -0`
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0
+    assert b"Traceback" not in err and b"BrokenPipe" not in err
+
+
+@pytest.mark.parametrize("url", ["bogus", "udpin:127.0.0.1:notaport", "tcp:127.0.0.1:5760"])
+def test_bad_url_exits_2_with_a_message(url, capsys):
+    with pytest.raises(SystemExit) as e:  # refused by the argument's own type, before anything opens
+        main(["gcs", "--url", url, "status"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "--url" in err and ("udpin:HOST:PORT" in err or "port" in err)
+
+
+def test_map_port_out_of_range_exits_2_before_connecting(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["gcs", "--url", f"udpin:127.0.0.1:{free_udp_port()}", "map", "--port", "99999"])
+    assert e.value.code == 2 and "--port" in capsys.readouterr().err
+
+
+def test_one_shot_drive_needs_seconds(capsys):
+    """A one-shot command's link ends when it returns: "drive until stopped" would be a lie there."""
+    assert main(["gcs", "--url", f"udpin:127.0.0.1:{free_udp_port()}", "drive", "1", "0"]) == 2
+    assert "give SECONDS" in capsys.readouterr().err
+
+
+def test_shell_prompt_completes_lists_and_survives_a_bad_line(capsys):
+    """At a terminal a bad line is a message, not the end of the session; names complete from the one table."""
+    import io
+
+    from gcs.shell import Session, Shell
+
+    with Client(f"udpin:127.0.0.1:{free_udp_port()}") as c, Session(c, io.StringIO()) as session:
+        shell = Shell(session, stdin=io.StringIO("fly away\nplan show --spec 'rtl:30 | launch'\nquit\n"))
+        shell.use_rawinput = False
+        assert shell.completenames("pa") == ["param"]
+        assert shell.completedefault("u", "plan u", 5, 6) == ["upload"]
+        shell.cmdloop()
+        out = session.out.getvalue()
+        assert "RETURN_TO_LINK" in out and "RETURN_TO_LAUNCH" in out  # the line after the bad one ran
+        shell.do_help("")
+        assert "plan upload" in session.out.getvalue() and "quit" in session.out.getvalue()
+    assert "invalid choice: 'fly'" in capsys.readouterr().err
