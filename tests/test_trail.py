@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -173,3 +174,75 @@ def test_update_cost_is_bounded_work():
     assert trail.count <= 100
     # each compaction frees >= an eighth of the memory, so there are at most n / (cap / 8) of them
     assert 0 < trail.compactions <= 20000 // 12
+
+
+def fold_drive(back_to: float, then_up: float = 0.0):
+    """Out along x to (10, 0), straight back along x to (back_to, 0) (the robot backs up over its own track), then
+    ``then_up`` metres off at a right angle."""
+    path = [(0.25 * k, 0.0) for k in range(41)]
+    path += [(10 - 0.25 * k, 0.0) for k in range(1, int(round((10 - back_to) / 0.25)) + 1)]
+    path += [(back_to, 0.25 * k) for k in range(1, int(round(then_up / 0.25)) + 1)]
+    return path
+
+
+@pytest.mark.parametrize("back_to", [9.0, 7.5, 4.0])
+def test_an_exact_fold_back_is_a_loop_of_zero_width(back_to):
+    """Back along x over the outbound track: a route from there must not first drive out to the turn point."""
+    trail = Trail(TrailConfig(spacing=0.2, tolerance=0.1, loop_distance=1.0))
+    for k, (x, y) in enumerate(fold_drive(back_to)):
+        trail.add(Crumb(x, y, k))
+    route = plan_route(trail, (back_to, 0.0), Target.ORIGIN, max_displacement=100.0, link_lost=False)
+    assert route.end == (0.0, 0.0)
+    assert route.points[:, 0].max() <= back_to + 0.1 + 1e-9
+    assert route.length <= back_to + 0.2
+    # nothing was dropped to do it: the turn point is still on the trail
+    assert np.isclose(trail.points()[:, 0].max(), 10.0)
+
+
+def test_a_partial_fold_back_is_cut_and_the_leg_off_it_kept():
+    """Back along the last segment to x = 8 (less than the 3 TRL_LOOP_D of path an ordinary loop needs), then 5 m
+    off at a right angle: the route comes down the side leg and joins the outbound track at x = 8, without the
+    4 m there and back to the turn point."""
+    trail = Trail(TrailConfig(spacing=0.2, tolerance=0.1, loop_distance=1.0))
+    for k, (x, y) in enumerate(fold_drive(8.0, then_up=5.0)):
+        trail.add(Crumb(x, y, k))
+    route = plan_route(trail, (8.0, 5.0), Target.ORIGIN, max_displacement=100.0, link_lost=False)
+    assert route.end == (0.0, 0.0)
+    assert route.points[:, 0].max() <= 8.0 + 0.1 + 1e-9
+    assert route.length <= 5.0 + 8.0 + 0.2
+    # the side leg itself is driven back, not cut across: the route passes within the tolerance of (8, 2.5)
+    assert poly_dist(np.array([8.0, 2.5]), route.points) <= 0.1 + 1e-9
+
+
+def test_a_fold_back_keeps_the_return_target_and_the_tags_of_its_own_crumbs():
+    """Out with the link good, a commanded return backs up over the track (its own crumbs tagged good, as they
+    were), then the link dies: the target is the last good crumb, on the folded part, and the way on from it
+    (a dead zone) leads toward the start, not out to the turn point (DESIGN §6)."""
+    trail = Trail(TrailConfig(spacing=0.2, tolerance=0.1, loop_distance=1.0))
+    walk = fold_drive(7.0)
+    walk += [(7.0 - 0.25 * k, 0.0) for k in range(1, 3)]  # on back, the link now lost
+    crumbs = [Crumb(x, y, k, link_good=k < len(walk) - 2) for k, (x, y) in enumerate(walk)]
+    for c in crumbs:
+        trail.add(c)
+    i_full = target_index(np.array([c.link_good for c in crumbs]), Target.LINK, True)
+    i_comp = target_index(trail.link_good(), Target.LINK, True)
+    assert np.allclose(trail.points()[i_comp], (crumbs[i_full].x, crumbs[i_full].y))
+    route = plan_route(trail, (6.5, 0.0), Target.LINK, max_displacement=100.0, link_lost=True, overshoot=2.0)
+    assert np.allclose(route.target, (7.0, 0.0))
+    assert route.points[:, 0].max() <= 7.0 + 0.1 + 1e-9
+    assert route.onward is not None and route.onward.end == (0.0, 0.0)
+    assert route.onward.points[:, 0].max() <= 7.0 + 0.1 + 1e-9
+
+
+@pytest.mark.parametrize("turn_deg", [0.0, 90.0, 120.0, 135.0])
+def test_ordinary_turns_and_link_transitions_are_not_folds(turn_deg):
+    """Only a stretch heading back along the previous one is cut: a corner, even a sharp one, and the two sides of
+    a link transition (a segment too short to have a direction) leave the route as driven."""
+    trail = Trail(TrailConfig(spacing=0.2, tolerance=0.1, loop_distance=1.0))
+    a = math.radians(turn_deg)
+    walk = [(1e-6, 0.0, False)]  # at rest when the link came: both sides of the transition at one spot
+    walk += [(0.25 * k, 0.0, not 20 <= k < 30) for k in range(41)]
+    walk += [(10 + 0.25 * k * math.cos(a), 0.25 * k * math.sin(a), True) for k in range(1, 25)]
+    for k, (x, y, good) in enumerate(walk):
+        trail.add(Crumb(x, y, k, link_good=good))
+    assert all(trail.shortcut(i) == -1 for i in range(len(trail)))

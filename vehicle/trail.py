@@ -11,6 +11,11 @@ Why it looks like this (DESIGN §6, and what SmartRTL gets wrong):
 * Loops are found with a spatial hash of the kept segments (cells of TRL_LOOP_D), so each crumb costs a look at
   nine cells instead of SmartRTL's O(n^2) pair scan. A kept point remembers the earliest older segment within
   TRL_LOOP_D (its *shortcut*); the route planner follows shortcuts to skip loops.
+* A fold-back (the robot backs up, or U-turns tighter than TRL_LOOP_D, over its own track) is a loop of zero width:
+  it never crosses the stretch it runs back along, and that stretch is the one just behind, so the path-length rule
+  alone would never see it. A crumb heading back along a kept segment gets that segment as its shortcut, so a later
+  return from the folded part does not first drive out to the turn point. Nothing is dropped for it: the folded
+  crumbs keep their own link tags and anchors, and the return target is chosen from them as before.
 * Memory is preallocated and bounded by TRL_MAX_PTS. When it is full the oldest half is re-simplified with twice
   the tolerance (its part's tolerance is recorded), so the trail degrades gracefully and never deactivates.
 """
@@ -21,6 +26,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+FOLD_SLOPE = 0.5  # a fold-back heads back within atan(0.5) (about 27 degrees) of the stretch it runs along
 
 
 @dataclass(frozen=True)
@@ -152,6 +159,11 @@ class Trail:
         self._pend_shortcut = -1
 
     def _extend(self, c: Crumb) -> None:
+        # the sleeve first: when c breaks it (a turn, or the robot coming back), its open end becomes a kept point
+        # before c is looked up, so a fold-back is seen against the stretch it runs back along
+        if self._pend is not None and not self._fits(c):
+            self._commit(self._pend, anchor=False)
+            self._reset_pending()
         loop = self._find_loop(c.x, c.y)
         entering = loop >= 0 and self._run_loop < 0
         self._run_loop = loop
@@ -166,18 +178,6 @@ class Trail:
         ax, ay = self._f[self.count - 1, 0], self._f[self.count - 1, 1]
         dx, dy = c.x - ax, c.y - ay
         d = math.hypot(dx, dy)
-        if self._pend is not None:
-            if d <= tol:
-                fits = d >= self._maxd - tol
-            else:
-                ang = _wrap(math.atan2(dy, dx) - self._base)
-                fits = self._lo <= ang <= self._hi and d >= self._maxd - tol
-            if not fits:
-                self._commit(self._pend, anchor=False)
-                self._reset_pending()
-                ax, ay = self._f[self.count - 1, 0], self._f[self.count - 1, 1]
-                dx, dy = c.x - ax, c.y - ay
-                d = math.hypot(dx, dy)
         if self._pend is None:
             self._base = math.atan2(dy, dx) if d > 0 else 0.0
         # narrow the wedge by this crumb's own cone
@@ -189,6 +189,16 @@ class Trail:
         self._maxd = max(self._maxd, d)
         self._pend = c
         self._pend_shortcut = loop  # the open end's own shortcut: the newest crumb's is the one a return uses
+
+    def _fits(self, c: Crumb) -> bool:
+        """Whether the open sleeve from the last kept point still holds c (and so every crumb since, within TRL_TOL)."""
+        tol = self.config.tolerance
+        dx, dy = c.x - self._f[self.count - 1, 0], c.y - self._f[self.count - 1, 1]
+        d = math.hypot(dx, dy)
+        if d <= tol:
+            return d >= self._maxd - tol
+        ang = _wrap(math.atan2(dy, dx) - self._base)
+        return self._lo <= ang <= self._hi and d >= self._maxd - tol
 
     def _commit(self, c: Crumb, anchor: bool, shortcut: int | None = None) -> None:
         if shortcut is None:
@@ -222,8 +232,9 @@ class Trail:
                 self._grid.setdefault(cell, []).append(seg)
 
     def _find_loop(self, x: float, y: float) -> int:
-        """The earliest kept segment within TRL_LOOP_D of (x, y) that is not just the trail behind us."""
-        if self.count < 3:
+        """The earliest kept segment within TRL_LOOP_D of (x, y) that is not just the trail behind us (or is, but
+        (x, y) is coming back along it)."""
+        if self.count < 2:
             return -1
         L = self.config.loop_distance
         cx, cy = self._cell(x, y)
@@ -233,17 +244,35 @@ class Trail:
                 for seg in self._grid.get((gx, gy), ()):
                     if best != -1 and seg >= best:
                         break
-                    if seg + 1 >= self.count - 1:
-                        continue
                     f = self._f
                     if _seg_dist(x, y, f[seg, 0], f[seg, 1], f[seg + 1, 0], f[seg + 1, 1]) >= L:
                         continue
-                    # the trail just behind us is always near: only a return after 3 L of path closes a loop
-                    if self._path_length_since(seg + 1, x, y) < 3.0 * L:
+                    # the trail just behind us is always near: only a return after 3 L of path closes a loop, or a
+                    # fold-back (a loop of zero width, which no amount of path makes cross itself)
+                    if not self._folds_back(x, y, seg) and self._path_length_since(seg + 1, x, y) < 3.0 * L:
                         continue
                     best = seg
                     break
         return best
+
+    def _folds_back(self, x: float, y: float, seg: int) -> bool:
+        """Whether (x, y) lies back along kept segment seg: behind its end by more than the tolerance (so not the
+        noise around a turn point) and within a narrow cone around it (heading back, not rounding a corner).
+
+        This is how a robot that backs up, or U-turns tighter than TRL_LOOP_D, comes back over its own track: the
+        new stretch runs along the previous one and never crosses it, and that previous stretch is the one just
+        behind, which the path-length rule must exclude."""
+        f = self._f
+        tol = max(self.config.tolerance, f[seg + 1, 5])
+        ax, ay, bx, by = f[seg, 0], f[seg, 1], f[seg + 1, 0], f[seg + 1, 1]
+        length = math.hypot(bx - ax, by - ay)
+        if length <= tol:
+            return False  # no direction to run back along (the two sides of a link transition, say)
+        ux, uy = (bx - ax) / length, (by - ay) / length
+        rx, ry = x - bx, y - by
+        back = -(rx * ux + ry * uy)
+        across = abs(rx * uy - ry * ux)
+        return back > tol and across <= FOLD_SLOPE * back
 
     def _path_length_since(self, i: int, x: float, y: float) -> float:
         """Path length from kept point i to (x, y), bounded early: we only need to know if it exceeds 3 L."""
