@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import shutil
 import socket
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 from sim.scenario import load
 from sim.serve import Server
@@ -59,3 +63,31 @@ def wait_until(predicate: Callable[[], bool], timeout: float, what: str) -> None
     while not predicate():
         assert time.monotonic() < end, f"timed out after {timeout} s waiting for {what}"
         time.sleep(0.05)
+
+
+class MAVProxy:
+    """The real MAVProxy (the pip package, headless, reading commands on stdin) against a served vehicle; its
+    console goes to ``log``. ``modules`` None keeps MAVProxy's default module set. Stopped by its own process."""
+
+    def __init__(self, gcs_port: int, tmp_path: Path, modules: str | None = None) -> None:
+        exe = shutil.which("mavproxy.py") or str(Path(sys.executable).with_name("mavproxy.py"))
+        self.log = tmp_path / "mavproxy.txt"
+        extra = [] if modules is None else [f"--default-modules={modules}"]
+        self.proc = subprocess.Popen(
+            [sys.executable, exe, f"--master=udpin:127.0.0.1:{gcs_port}", "--dialect=returnlink",
+             "--state-basedir", str(tmp_path), *extra],
+            stdin=subprocess.PIPE, stdout=self.log.open("w"), stderr=subprocess.STDOUT, text=True, cwd=tmp_path)
+
+    def say(self, command: str) -> None:
+        self.proc.stdin.write(command + "\n")
+        self.proc.stdin.flush()
+
+    def text(self) -> str:
+        return self.log.read_text()
+
+    def wait_for_parameters(self, count: int, timeout: float = 30.0) -> None:
+        wait_until(lambda: f"Received {count} parameters" in self.text(), timeout, "MAVProxy to fetch the parameters")
+
+    def close(self) -> None:
+        self.proc.kill()
+        self.proc.wait(5)

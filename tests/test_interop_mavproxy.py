@@ -2,15 +2,11 @@
 
 from __future__ import annotations
 
-import shutil
-import subprocess
-import sys
 import time
-from pathlib import Path
 
 import pytest
 
-from tests.interop import ServedVehicle, wait_until
+from tests.interop import MAVProxy, ServedVehicle, wait_until
 from vehicle.app import State
 from vehicle.params import SPECS
 
@@ -20,31 +16,15 @@ PLAN = ("QGC WPL 110\n"
         "2\t0\t2\t19\t20\t0\t0\t0\t0\t0\t0\t1\n")
 
 
-def _mavproxy() -> list[str]:
-    exe = shutil.which("mavproxy.py") or str(Path(sys.executable).with_name("mavproxy.py"))
-    return [sys.executable, exe]
-
-
 @pytest.fixture()
 def mavproxy(tmp_path):
     served = ServedVehicle("tunnel")
-    log = tmp_path / "mavproxy.txt"
-    proc = subprocess.Popen(
-        [*_mavproxy(), f"--master=udpin:127.0.0.1:{served.gcs_port}", "--dialect=returnlink",
-         "--state-basedir", str(tmp_path), "--default-modules=wp,param,mode,cmdlong,link,log,fence,arm"],
-        stdin=subprocess.PIPE, stdout=log.open("w"), stderr=subprocess.STDOUT, text=True, cwd=tmp_path)
-
-    def say(command: str) -> None:
-        proc.stdin.write(command + "\n")
-        proc.stdin.flush()
-
+    mp = MAVProxy(served.gcs_port, tmp_path, "wp,param,mode,cmdlong,link,log,fence,arm")
     try:
-        wait_until(lambda: f"Received {len(SPECS)} parameters" in log.read_text(), 30,
-                   "MAVProxy to fetch the parameters")
-        yield served, say, log
+        mp.wait_for_parameters(len(SPECS))
+        yield served, mp.say, mp.log
     finally:
-        proc.kill()
-        proc.wait(5)
+        mp.close()
         served.close()
 
 

@@ -131,25 +131,14 @@ def test_lockstep_tlog_is_stamped_from_2026_plus_sim_time(tmp_path):
 
 def test_mavproxy_with_its_default_modules_gets_parameters_without_an_ftp_time_out(tmp_path):
     """MAVProxy's default module set includes ftp, and its param module asks for @PARAM/param.pck first."""
-    import shutil
-    import subprocess
-    import sys
-    from pathlib import Path
+    from tests.interop import MAVProxy, ServedVehicle
 
-    from tests.interop import ServedVehicle, wait_until
-
-    exe = shutil.which("mavproxy.py") or str(Path(sys.executable).with_name("mavproxy.py"))
     served = ServedVehicle("tunnel")
-    log = tmp_path / "mavproxy.txt"
-    proc = subprocess.Popen([sys.executable, exe, f"--master=udpin:127.0.0.1:{served.gcs_port}",
-                             "--dialect=returnlink", "--state-basedir", str(tmp_path)],
-                            stdin=subprocess.PIPE, stdout=log.open("w"), stderr=subprocess.STDOUT, text=True,
-                            cwd=tmp_path)
+    mp = MAVProxy(served.gcs_port, tmp_path)  # its default modules, ftp among them
     try:
-        wait_until(lambda: f"Received {len(SPECS)} parameters" in log.read_text(), 30,
-                   "MAVProxy to fetch the parameters")
+        mp.wait_for_parameters(len(SPECS))
     finally:
-        proc.kill()
-        proc.wait(5)
+        mp.close()
         served.close()
+    log = mp.log
     assert "FTP: request timed out" not in log.read_text()

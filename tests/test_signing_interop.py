@@ -3,7 +3,6 @@ it; MAVSDK 4, which cannot sign, can watch it (telemetry, parameter download) bu
 
 from __future__ import annotations
 
-import subprocess
 import time
 
 import pytest
@@ -13,8 +12,7 @@ from mavsdk.plugins.param import Param
 from mavsdk.plugins.telemetry import Telemetry
 
 from link.signing import Key, Verdict
-from tests.interop import ServedVehicle, wait_until
-from tests.test_interop_mavproxy import _mavproxy
+from tests.interop import MAVProxy, ServedVehicle, wait_until
 from vehicle.app import State
 from vehicle.keystore import write_key
 from vehicle.params import SPECS
@@ -35,20 +33,11 @@ def keyed(tmp_path):
 
 def test_mavproxy_with_the_signing_module_flies_a_keyed_vehicle(keyed, tmp_path):
     served = keyed
-    log = tmp_path / "mavproxy.txt"
-    proc = subprocess.Popen(
-        [*_mavproxy(), f"--master=udpin:127.0.0.1:{served.gcs_port}", "--dialect=returnlink",
-         "--state-basedir", str(tmp_path), "--default-modules=param,mode,cmdlong,link,signing"],
-        stdin=subprocess.PIPE, stdout=log.open("w"), stderr=subprocess.STDOUT, text=True, cwd=tmp_path)
-
-    def say(command: str) -> None:
-        proc.stdin.write(command + "\n")
-        proc.stdin.flush()
-
+    mp = MAVProxy(served.gcs_port, tmp_path, "param,mode,cmdlong,link,signing")
+    say, log = mp.say, mp.log
     try:
         # unsigned, it can still download the parameters ...
-        wait_until(lambda: f"Received {len(SPECS)} parameters" in log.read_text(), 30,
-                   "MAVProxy to fetch the parameters")
+        mp.wait_for_parameters(len(SPECS))
         say("param set LNK_TIMEOUT 5")  # ... but not set one
         wait_until(lambda: "unsigned PARAM_SET from 255 refused" in log.read_text(), 10, "the refusal")
         assert served.vehicle.params["LNK_TIMEOUT"] == 3.0
@@ -64,8 +53,7 @@ def test_mavproxy_with_the_signing_module_flies_a_keyed_vehicle(keyed, tmp_path)
         assert any(e.reason.name == "OPERATOR_EXPIRE" for e in served.vehicle.event_log)
         assert served.server.endpoint.counters.signing[Verdict.ACCEPT] > 0
     finally:
-        proc.kill()
-        proc.wait(5)
+        mp.close()
 
 
 def test_mavsdk_can_watch_a_keyed_vehicle_but_not_act(keyed):
