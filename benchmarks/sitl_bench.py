@@ -44,7 +44,7 @@ GROUPS = [
     ("pymavlink/", "pymavlink (pack, parse)"), ("link/dialect", "pymavlink (pack, parse)"),
     ("vehicle/app.py", "vehicle loop"), ("vehicle/mavlink.py", "vehicle endpoint"),
     ("vehicle/missions.py", "vehicle endpoint"), ("vehicle/telemetry.py", "telemetry"),
-    ("vehicle/modes.py", "telemetry"), ("vehicle/lease.py", "lease"), ("vehicle/linkwatch", "lease"),
+    ("vehicle/modes.py", "telemetry"), ("vehicle/lease.py", "lease"), ("vehicle/link_watch.py", "link watch"),
     ("vehicle/trail.py", "trail, return, navigation"), ("vehicle/returning.py", "trail, return, navigation"),
     ("vehicle/service.py", "trail, return, navigation"), ("vehicle/navigation.py", "trail, return, navigation"),
     ("vehicle/", "vehicle (other)"), ("link/radio.py", "radio + bus"), ("link/transports.py", "radio + bus"),

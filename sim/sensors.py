@@ -7,6 +7,7 @@ here never shift the robot's or the radio's, and theirs never shift these.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,7 +46,7 @@ class Sensors:
 
     def read(self, t: float, dt: float) -> Readings:
         s, r = self.spec, self.rng
-        self.bias += r.normal(0.0, s.gyro_bias_walk * np.sqrt(dt))
+        self.bias += r.normal(0.0, s.gyro_bias_walk * math.sqrt(dt))
         gyro = self.robot.body.angular_velocity + self.bias + r.normal(0.0, s.gyro_noise)
         fix = None
         if t + 1e-9 >= self._next_fix:
