@@ -148,6 +148,8 @@ class Vehicle:
 
     # ----- lease transitions -------------------------------------------------------------------------------
     def _apply(self, out: Outcome) -> None:
+        if out.book is self.book and not out.events and not out.released:
+            return  # nothing happened (most ticks): the same book, no event, no command
         issued = out.book.last_epoch != self.book.last_epoch
         self.book = out.book
         if issued and self.on_epoch is not None and out.book.last_epoch is not None:
