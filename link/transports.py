@@ -10,7 +10,6 @@ import contextlib
 import heapq
 import socket
 from collections.abc import Callable, Collection
-from dataclasses import dataclass, field
 
 Address = tuple[str, int]
 
@@ -81,38 +80,36 @@ class UdpTransport:
         self.sock.close()
 
 
-@dataclass(order=True)
-class _Packet:
-    at: float
-    seq: int
-    dst: str = field(compare=False)
-    src: str = field(compare=False)
-    data: bytes = field(compare=False)
-
-
 class LockstepBus:
     """Named endpoints exchanging bytes at simulated times. A delay (and whether a packet arrives at all) is
-    decided by the sender's caller, e.g. the radio model; equal times keep send order."""
+    decided by the sender's caller, e.g. the radio model; equal times keep send order.
+
+    One heap per destination, of plain (time, order, source, bytes) tuples: a receiver pops only its own packets
+    (one shared heap made every receive pop and re-push everyone else's, on every tick)."""
 
     def __init__(self) -> None:
-        self._queue: list[_Packet] = []
+        self._queues: dict[str, list[tuple[float, int, str, bytes]]] = {}
         self._seq = 0
         self.delivered = 0
 
     def send(self, src: str, dst: str, data: bytes, at: float) -> None:
         self._seq += 1
-        heapq.heappush(self._queue, _Packet(at, self._seq, dst, src, data))
+        q = self._queues.get(dst)
+        if q is None:
+            q = self._queues[dst] = []
+        heapq.heappush(q, (at, self._seq, src, data))
 
     def receive(self, dst: str, now: float) -> list[tuple[bytes, str]]:
-        """Every packet for ``dst`` due by ``now`` (other endpoints' packets stay queued)."""
-        due, keep = [], []
-        while self._queue and self._queue[0].at <= now:
-            p = heapq.heappop(self._queue)
-            (due if p.dst == dst else keep).append(p)
-        for p in keep:
-            heapq.heappush(self._queue, p)
+        """Every packet for ``dst`` due by ``now``, in time order, equal times in send order."""
+        q = self._queues.get(dst)
+        if not q or q[0][0] > now:
+            return []
+        due = []
+        while q and q[0][0] <= now:
+            _, _, src, data = heapq.heappop(q)
+            due.append((data, src))
         self.delivered += len(due)
-        return [(p.data, p.src) for p in due]
+        return due
 
     def pending(self) -> int:
-        return len(self._queue)
+        return sum(len(q) for q in self._queues.values())

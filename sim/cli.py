@@ -74,7 +74,7 @@ def _parm_file(path: str | None) -> Path | None:
 
 
 def _cmd_sim_run(args: argparse.Namespace) -> int:
-    from sim import metrics, report
+    from sim import metrics
     from sim.runner import Run, write_metrics, write_tlog
 
     if args.replay:
@@ -93,6 +93,8 @@ def _cmd_sim_run(args: argparse.Namespace) -> int:
     try:
         paths = [write_metrics(m, out / "metrics.json"), write_tlog(run, out / "run.tlog")]
         if not args.no_plots:
+            from sim import report  # matplotlib: about 0.4 CPU-s to import, paid only when plots are drawn
+
             paths += [report.trajectory(run, out / "trajectory.png"), report.timeline(run, out / "timeline.png")]
     except OSError as e:  # the directory was writable a moment ago: a full disk, a removed directory
         print(metrics.summary(run, m))

@@ -116,9 +116,9 @@ class Rover(Robot):
 
     def odometry_speed(self, dt: float) -> float:
         s = self.spec
-        slip = self.rng.normal(0.0, s.slip_std * (1.0 + abs(self.yaw_rate)))
+        slip = s.slip_std * (1.0 + abs(self.yaw_rate)) * self.rng.standard_normal()
         # wheels report the commanded wheel speed: against a wall they spin while the body does not move
-        return self.speed * self.scale * (1.0 + slip) + self.rng.normal(0.0, s.wheel_noise)
+        return self.speed * self.scale * (1.0 + slip) + s.wheel_noise * self.rng.standard_normal()
 
 
 @dataclass(frozen=True)
@@ -193,7 +193,7 @@ class Legged(Robot):
         if moving and (old < 0.5 <= self.phase or self.phase < old):
             # touchdown of a diagonal pair: Raibert foot placement ahead of the hip, plus slip
             self.steps += 1
-            self.slip = self.rng.normal(0.0, self.spec.slip_std)
+            self.slip = self.spec.slip_std * self.rng.standard_normal()
             pair = (0, 3) if self.phase < 0.5 else (1, 2)
             hips = self._hips()
             x, y, a = self.pose
@@ -205,7 +205,7 @@ class Legged(Robot):
     def odometry_speed(self, dt: float) -> float:
         # stance-foot kinematics measure the body's motion relative to the feet, wrong by the step's slip; a
         # body held by a wall while the gait goes on slips its stance feet, and the legs still report the gait
-        return self.speed * (1.0 + self.slip) + self.rng.normal(0.0, self.spec.leg_odo_noise)
+        return self.speed * (1.0 + self.slip) + self.spec.leg_odo_noise * self.rng.standard_normal()
 
 
 def make_robot(kind: str, world: World, x: float, y: float, yaw: float, rng: np.random.Generator) -> Robot:

@@ -7,6 +7,7 @@ here never shift the robot's or the radio's, and theirs never shift these.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,9 +45,11 @@ class Sensors:
         self.denied_ticks = 0
 
     def read(self, t: float, dt: float) -> Readings:
+        # ``sigma * rng.standard_normal()`` is the draw ``rng.normal(0.0, sigma)`` makes, bit for bit (numpy
+        # computes loc + scale * z), at half the cost of the argument handling, on every tick
         s, r = self.spec, self.rng
-        self.bias += r.normal(0.0, s.gyro_bias_walk * np.sqrt(dt))
-        gyro = self.robot.body.angular_velocity + self.bias + r.normal(0.0, s.gyro_noise)
+        self.bias += (s.gyro_bias_walk * math.sqrt(dt)) * r.standard_normal()
+        gyro = self.robot.body.angular_velocity + self.bias + s.gyro_noise * r.standard_normal()
         fix = None
         if t + 1e-9 >= self._next_fix:
             self._next_fix = t + 1.0 / s.fix_hz
@@ -54,11 +57,11 @@ class Sensors:
             if self.world.gps_denied(x, y):
                 self.denied_ticks += 1
             elif r.random() >= s.fix_dropout:
-                fix = Fix(x + r.normal(0.0, s.fix_std), y + r.normal(0.0, s.fix_std), s.fix_std)
+                fix = Fix(x + s.fix_std * r.standard_normal(), y + s.fix_std * r.standard_normal(), s.fix_std)
                 self.fixes += 1
         heading = None
         if t + 1e-9 >= self._next_heading:
             self._next_heading = t + 1.0 / s.heading_hz
-            heading = self.robot.pose[2] + r.normal(0.0, s.heading_std)
-        accel = self.robot.accel + self.accel_bias + self.imu_rng.normal(0.0, s.accel_noise)
+            heading = self.robot.pose[2] + s.heading_std * r.standard_normal()
+        accel = self.robot.accel + self.accel_bias + s.accel_noise * self.imu_rng.standard_normal()
         return Readings(t, self.robot.odometry_speed(dt), float(gyro), fix, heading, s.heading_std, float(accel))

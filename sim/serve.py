@@ -58,6 +58,13 @@ class Server:
         self.proxy.flush(t)
         return self.proxy.from_ground(t)
 
+    def _send(self, frame: bytes, t: float) -> None:
+        """Into the radio, and out at once if the radio says it is due by now (a perfect link, DESIGN §8: a
+        COMMAND_ACK leaves in the tick its command was received). Flushing only at the next tick's start held every
+        reply back a whole tick (20 ms at 50 Hz) on top of the radio's own latency."""
+        self.proxy.to_ground(frame, t)
+        self.proxy.flush(t)
+
     def _after_tick(self, t: float) -> None:
         """Physics between vehicle ticks, the channel for the new position, a trace for the plot."""
         self.driver.advance(DT)
@@ -76,9 +83,11 @@ class Server:
                   f"  pos ({p.x:6.1f}, {p.y:6.1f})  link {link}", file=self._out, flush=True)
 
     def serve(self, speedup: float = 1.0, duration: float = float("inf"), stop=lambda: False,
-              report_every: float = 5.0, out=sys.stderr) -> None:
+              report_every: float = 5.0, out=sys.stderr, clock=time.monotonic, sleep=time.sleep) -> None:
+        """Run until ``duration`` simulated seconds or ``stop()``; ``clock`` and ``sleep`` are injectable so a test
+        paces the loop in simulated time."""
         self._out, self._report_every, self._next_report = out, report_every, 0.0
-        run(self.vehicle, self.endpoint, self._receive, self.proxy.to_ground, speedup=speedup,
+        run(self.vehicle, self.endpoint, self._receive, self._send, clock=clock, sleep=sleep, speedup=speedup,
             stop=lambda: self.vehicle.t >= duration or stop(), after_tick=self._after_tick)
 
     def close(self) -> None:

@@ -265,3 +265,19 @@ def test_stale_guards_catch_a_setpoint_that_slipped_past_the_lease_check(monkeyp
     fake.setpoint = Setpoint(1.0, 0.0, LeaseId(old.epoch, (old.index + 5,)), 9.0, 200)  # right lease, wrong sender
     run._audit(fake)
     assert run.audit_stale == 2
+
+
+def test_a_cleared_setpoint_is_judged_again_once_its_lease_is_gone():
+    """The teleop guards are skipped while the lease book and the setpoint are the very objects they last cleared
+    (both immutable); a lease that ends makes a new book, and the same setpoint must stop on the next tick."""
+    pair = acquired(Pair())
+    v = pair.vehicle
+    pair.gs.drive_velocity(1.0, 0.0)
+    pair.step(1.0)
+    sp, t = v.setpoint, pair.t
+    assert sp is not None and sp.speed > 0.0
+    assert v._teleop(t) == (sp.speed, sp.yaw_rate)
+    assert v._teleop(t) == (sp.speed, sp.yaw_rate)  # cleared once, the same answer
+    assert v.expire(v.book.owner, v.book.epoch, v.book.current.index, t).executes
+    assert v.setpoint is sp
+    assert v._teleop(t) == (0.0, 0.0) and v.setpoint is None

@@ -111,3 +111,51 @@ def test_proxy_keeps_the_order_of_each_direction_under_jitter():
     for got in (up, down):
         numbers = [int(d[1:]) for d in got]
         assert len(numbers) > 250 and numbers == sorted(numbers)
+
+
+class _FakeLink:
+    """The server's UDP side in memory: a COMMAND_LONG waiting at one moment of the injected clock, and every
+    datagram the server sends with the clock reading at that moment."""
+
+    def __init__(self, clock: list[float], frame: bytes, at: float) -> None:
+        self.clock, self.frame, self.at = clock, frame, at
+        self.received_at: float | None = None
+        self.sent: list[tuple[float, bytes]] = []
+
+    def receive(self, max_packets: int = 256) -> list[tuple[bytes, tuple[str, int]]]:
+        if self.received_at is None and self.clock[0] >= self.at:
+            self.received_at = self.clock[0]
+            return [(self.frame, ("127.0.0.1", 14550))]
+        return []
+
+    def send(self, data: bytes, to=None) -> None:
+        self.sent.append((self.clock[0], data))
+
+
+def test_sim_serve_answers_a_command_in_the_tick_it_arrived():
+    """DESIGN §8: a COMMAND_LONG read at one tick is answered before the loop sleeps toward the next (the clock is
+    injected: simulated time only)."""
+    from sim.scenario import load
+    from sim.serve import Server
+    from vehicle.mavlink import mav
+
+    server = Server(load("open"), port=0, peers=(), perfect_link=True)
+    gcs = mav.MAVLink(None, 255, 190)
+    cmd = gcs.command_long_encode(1, 1, mav.MAV_CMD_REQUEST_MESSAGE, 0, 0, 0, 0, 0, 0, 0, 0).pack(gcs)
+    now = [50.0]
+    link = _FakeLink(now, cmd, at=50.3)
+    server.proxy.transport = link
+
+    def sleep(s: float) -> None:
+        now[0] += s
+
+    try:
+        server.serve(duration=0.6, clock=lambda: now[0], sleep=sleep, out=None)
+    finally:
+        server.close()
+    assert link.received_at is not None
+    parser = mav.MAVLink(None, 0, 0)
+    acks = [(at, m) for at, data in link.sent for m in parser.parse_buffer(data) or []
+            if m.get_type() == "COMMAND_ACK"]
+    assert [m.command for _, m in acks] == [mav.MAV_CMD_REQUEST_MESSAGE]
+    assert acks[0][0] == link.received_at  # no sleep between the command read and its answer: the same tick

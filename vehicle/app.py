@@ -143,9 +143,13 @@ class Vehicle:
         self.commands_rejected = 0
         self.stale_commands_executed = 0
         self.service_faults = 0  # return blocks ended because the service raised (each reported, never fatal)
+        # the (book, setpoint) pair the teleop guards last passed (see ``_teleop``)
+        self._cleared: tuple[LeaseBook | None, Setpoint | None] = (None, None)
 
     # ----- lease transitions -------------------------------------------------------------------------------
     def _apply(self, out: Outcome) -> None:
+        if out.book is self.book and not out.events and not out.released:
+            return  # nothing happened (most ticks): the same book, no event, no command
         issued = out.book.last_epoch != self.book.last_epoch
         self.book = out.book
         if issued and self.on_epoch is not None and out.book.last_epoch is not None:
@@ -459,15 +463,20 @@ class Vehicle:
         if t > sp.until:
             self.setpoint = None
             return 0.0, 0.0
-        if self.book.check(self.book.owner or 0, sp.lease).verdict is not Verdict.EXECUTE:
-            # the lease this setpoint was sent under is gone: it must not drive the robot any more
-            self.setpoint = None
-            return 0.0, 0.0
-        if self.book.current_id is None or sp.lease.path[0] != self.book.current_id.path[0]:
-            # a last guard at the actuator, independent of how the setpoint got here: never drive on it
-            self.stale_commands_executed += 1
-            self.setpoint = None
-            return 0.0, 0.0
+        book = self.book
+        if self._cleared[0] is not book or self._cleared[1] is not sp:
+            # (skipped when both guards passed for this very book and setpoint: both are immutable and the guards
+            # pure reads of them, so on most ticks of a drive the verdict is already known)
+            if book.check(book.owner or 0, sp.lease).verdict is not Verdict.EXECUTE:
+                # the lease this setpoint was sent under is gone: it must not drive the robot any more
+                self.setpoint = None
+                return 0.0, 0.0
+            if book.current_id is None or sp.lease.path[0] != book.current_id.path[0]:
+                # a last guard at the actuator, independent of how the setpoint got here: never drive on it
+                self.stale_commands_executed += 1
+                self.setpoint = None
+                return 0.0, 0.0
+            self._cleared = (book, sp)
         if abs(sp.speed) > 0.2 and self.readings is not None:
             self.outbound_speed += 0.02 * (abs(self.readings.speed) - self.outbound_speed)
         return sp.speed, sp.yaw_rate

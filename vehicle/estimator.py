@@ -54,6 +54,9 @@ _H_POS = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
 
 
 _H_YAW = np.array([[0.0, 0, 1.0, 0]])
+_H_YAW_T = _H_YAW.T  # the same arrays heading() built on every call (five times a second)
+_I4 = np.eye(4)
+_I4.flags.writeable = False
 
 
 def _jac_pos(_x: np.ndarray) -> np.ndarray:
@@ -192,9 +195,9 @@ class Estimator:
         H = _H_YAW
         S = float(f.P[2, 2]) + std * std
         innov = (yaw - float(f.x[2, 0]) + math.pi) % (2 * math.pi) - math.pi
-        K = f.P @ H.T / S
+        K = f.P @ _H_YAW_T / S
         f.x = f.x + K * innov
-        f.P = (np.eye(4) - K @ H) @ f.P
+        f.P = (_I4 - K @ H) @ f.P
         self._pose = None
 
     @property

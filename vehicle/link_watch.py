@@ -94,7 +94,8 @@ class Delivery:
         a = self.arrivals
         if len(a) < 2:
             return None
-        span_t = max(x for x, _ in a) - min(x for x, _ in a)
+        times = [x for x, _ in a]  # (a list and two builtins: half the cost of two generators, every packet)
+        span_t = max(times) - min(times)
         span_u = a[-1][1] - a[0][1]
         return span_t / span_u if span_t > 0 and span_u > 0 else None
 
