@@ -164,6 +164,17 @@ def test_smartrtl_acts_fs_timeout_after_the_gcs_timeout_and_keeps_going_when_the
     assert m["regained_by"] == "return"
 
 
+def test_smartrtl_acts_fs_timeout_after_a_loss_on_a_marginal_link_too():
+    """On `loop` the link fades (delivery under LNK_MIN_Q) while lucky packets still arrive: the lease book
+    declares COMMS_LOST and takes the operator's control away, so the failsafe must act FS_TIMEOUT later rather
+    than wait for a silence that never comes (it once stood still for the rest of the run)."""
+    r, m = flown("smartrtl", "loop", 45.0, seed=1)
+    lost = _comms_lost(r)
+    assert r.vehicle.contingency.acted, "SmartRTL never acted after the loss"
+    assert r.vehicle.contingency.acted[0] - lost == pytest.approx(FS_TIMEOUT, abs=DT + 1e-9)
+    assert m["distance_back_m"] > 1.0
+
+
 def test_smartrtl_switched_on_by_the_operator_acts_at_once(tmp_path):
     path = _variant(tmp_path, "tunnel", ("[criteria]", '[[events]]\nt = 20.0\naction = "rtl"\n\n[criteria]'))
     r = Run(load(str(path)), "rover", duration=40.0, policy="smartrtl").run()

@@ -141,6 +141,7 @@ class SmartRTL(Baseline):
         self.returning = False
         self.driver: PathDriver | None = None
         self.fallback = False  # deactivated: it flew RTL instead
+        self.lost_at = 0.0  # when the failsafe condition began (the block started after COMMS_LOST)
 
     def observe(self, vehicle: Vehicle, t: float) -> None:
         p = vehicle.estimator.pose
@@ -159,6 +160,11 @@ class SmartRTL(Baseline):
         mode switched by hand) takes over at once."""
         self.driver = None
         self.returning = True
+        # the failsafe condition starts with the vehicle's COMMS_LOST: silence for FS_GCS_TIMEOUT (= LNK_TIMEOUT),
+        # or, on this vehicle, a delivery below LNK_MIN_Q for as long; waiting instead for silence since the last
+        # packet heard would never act on a marginal link whose lucky packets keep arriving, while the lease book
+        # has already taken the operator's control away
+        self.lost_at = t
         if not vehicle.book.link.lost:
             self._act(vehicle, t, x, y)
 
@@ -167,8 +173,7 @@ class SmartRTL(Baseline):
             link = vehicle.book.link
             if not link.lost:
                 return 0.0, 0.0, ExpireReason.COMPLETED  # the heartbeat came back first: the failsafe cleared
-            heard = link.last_heard if link.last_heard is not None else t
-            if t + 1e-9 < heard + vehicle.params["LNK_TIMEOUT"] + self.fs_timeout:
+            if t + 1e-9 < self.lost_at + self.fs_timeout:
                 return 0.0, 0.0, None
             self._act(vehicle, t, x, y)
         assert self.driver is not None
