@@ -17,10 +17,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 from gcs.station import GroundStation, Pending, Transfer, mav
+from link.mission import Item
+from link.parameters import ParamError, format_parm, parse_parm
 from link.signing import Key, stamp_from_unix
 from link.transports import UdpTransport
-from vehicle.missions import Item
-from vehicle.params import ParamError, format_parm, parse_parm
 
 POLL = 0.005
 

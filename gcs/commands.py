@@ -64,7 +64,7 @@ def plan_items(a: argparse.Namespace) -> list:
 
 def _check_parm(a: argparse.Namespace, session: bool) -> None:
     """A .parm file to load is read and checked before any link opens: an error names file and line (exit 2)."""
-    from vehicle.params import ParamError, parse_parm
+    from link.parameters import ParamError, parse_parm
 
     try:
         parse_parm(Path(a.file).read_text(encoding="utf-8"), a.file)

@@ -1,6 +1,6 @@
 """Return plans on the ground: QGC WPL 110 files and a short text form (``rtl:50 | loiter:30 | launch``).
 
-A plan is a list of ``vehicle.missions.Item`` in the MISSION_ITEM_INT form, exactly what goes over the wire.
+A plan is a list of ``link.mission.Item`` in the MISSION_ITEM_INT form, exactly what goes over the wire.
 Every item is checked against the same field ranges the vehicle applies (``link.plan_items``), so a plan the
 vehicle would refuse is refused here, before it is uploaded, with the file and line or the spec word named.
 """
@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+from link.mission import Item, Origin
 from link.plan_items import (
     LEASE_BOUNDARY,
     MISSION_FRAME,
@@ -19,7 +20,6 @@ from link.plan_items import (
     check_item,
     position_scale,
 )
-from vehicle.missions import Item, Origin
 
 WPL_HEADER = "QGC WPL 110"
 

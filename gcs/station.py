@@ -13,8 +13,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 from link import dialect
+from link.mission import Item, item_from_message
 from link.signing import Key, Streams, Verdict, advance, enable, sim_stamp
-from vehicle.missions import Item, item_from_message
 
 mav = dialect.load()
 

@@ -11,6 +11,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from link.mission import EARTH_R, Item, Origin, item_from_message  # noqa: F401 - re-exported
 from link.plan_items import (  # noqa: F401 - re-exported for existing importers
     GLOBAL_FRAMES,
     LOCAL_FRAMES,
@@ -28,56 +29,11 @@ from vehicle.service import PlanItem
 ITEM_TIMEOUT = 0.5  # s before an item is requested again
 ITEM_RETRIES = 5
 MAX_ITEMS = 500
-EARTH_R = 6378137.0
 MAX_WAYPOINT_DISTANCE = MAX_DISPLACEMENT  # m from the origin
 
 # MAV_MISSION_RESULT
 ACCEPTED, ERROR, UNSUPPORTED_FRAME, UNSUPPORTED, NO_SPACE, INVALID = 0, 1, 2, 3, 4, 5
 INVALID_SEQUENCE, DENIED, OPERATION_CANCELLED = 13, 14, 15
-
-
-@dataclass(frozen=True)
-class Item:
-    """A mission item exactly as received (MISSION_ITEM_INT fields), so a download returns what was uploaded."""
-
-    seq: int
-    frame: int
-    command: int
-    current: int
-    autocontinue: int
-    param1: float
-    param2: float
-    param3: float
-    param4: float
-    x: int
-    y: int
-    z: float
-    mission_type: int
-
-
-@dataclass(frozen=True)
-class Origin:
-    """The local frame's origin on the globe, for global <-> local conversion of positions."""
-
-    lat: float = 47.397742
-    lon: float = 8.545594
-    alt: float = 488.0
-
-    def to_global(self, x: float, y: float) -> tuple[float, float]:
-        lat = self.lat + math.degrees(x / EARTH_R)
-        lon = self.lon + math.degrees(y / (EARTH_R * math.cos(math.radians(self.lat))))
-        return lat, lon
-
-    def to_local(self, lat: float, lon: float) -> tuple[float, float]:
-        x = math.radians(lat - self.lat) * EARTH_R
-        y = math.radians(lon - self.lon) * EARTH_R * math.cos(math.radians(self.lat))
-        return x, y
-
-
-def item_from_message(m, x: int | None = None, y: int | None = None) -> Item:
-    """A MISSION_ITEM_INT (or a MISSION_ITEM with its x/y already scaled) as an ``Item``."""
-    return Item(m.seq, m.frame, m.command, m.current, m.autocontinue, m.param1, m.param2, m.param3, m.param4,
-                int(m.x) if x is None else x, int(m.y) if y is None else y, m.z, getattr(m, "mission_type", 0))
 
 
 def to_plan(items: tuple[Item, ...], origin: Origin) -> tuple[PlanItem, ...]:

@@ -1,0 +1,111 @@
+"""The parameter table of DESIGN §5 and the .parm text format (MAVProxy/ArduPilot), shared by both ends.
+
+The names, defaults, ranges and meanings are part of the interface contract: the vehicle enforces them, and a
+ground station, a scenario file or a campaign spec checks a value against the same table before it sends or runs
+anything. The vehicle keeps the current values and its files (``vehicle/params.py``); this module has no state.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    name: str
+    default: float
+    lo: float
+    hi: float
+    units: str
+    meaning: str
+    integer: bool = False
+
+
+SPECS: tuple[ParamSpec, ...] = (
+    ParamSpec("LNK_TIMEOUT", 3.0, 0.5, 120.0, "s", "owner silent this long -> COMMS_LOST"),
+    ParamSpec("LNK_REGAIN_S", 1.0, 0.0, 10.0, "s", "owner heard continuously this long -> LINK_REGAINED"),
+    ParamSpec("LNK_GOOD_S", 1.5, 0.1, 10.0, "s", "a crumb is link-good if the owner was heard within this"),
+    ParamSpec("RTL_MAX_DISP", 50.0, 1.0, 10000.0, "m", "max displacement of one return block"),
+    ParamSpec("RTL_MAX_TIME", 300.0, 0.0, 3600.0, "s", "a return block gives up after this (0 = no limit)"),
+    ParamSpec("RTL_SPEED", 0.0, 0.0, 5.0, "m/s", "return speed; 0 = the speed used outbound"),
+    ParamSpec("RTL_TARGET", 0, 0, 2, "", "LINK / ORIGIN / HEADING", integer=True),
+    ParamSpec("RTL_REGAIN_ACT", 0, 0, 1, "", "on link regained: 0 halt and hold, 1 continue to target", integer=True),
+    ParamSpec("RTL_REARM", 1, 0, 1, "", "reschedule the return plan behind every fresh operator lease", integer=True),
+    ParamSpec("RTL_ARRIVE_R", 1.0, 0.1, 10.0, "m", "arrival radius"),
+    ParamSpec("TRL_SPACING", 0.5, 0.05, 10.0, "m", "minimum distance between recorded crumbs"),
+    ParamSpec("TRL_TOL", 0.25, 0.01, 5.0, "m", "simplification tolerance (degrades upward only when memory is full)"),
+    ParamSpec("TRL_LOOP_D", 1.0, 0.1, 10.0, "m", "trail segments closer than this close a loop"),
+    ParamSpec("TRL_MAX_PTS", 2000, 50, 100000, "", "memory bound of the trail", integer=True),
+    ParamSpec("LEASE_AUTOGRANT", 1, 0, 1, "", "plain clients get the root implicitly", integer=True),
+    ParamSpec("LEASE_STALE_TAKE", 1, 0, 1, "", "a silent owner may be taken over", integer=True),
+    ParamSpec("LNK_MIN_Q", 0.25, 0.0, 0.9, "",
+              "owner's packet delivery below this for LNK_TIMEOUT also counts as lost (0 = silence only)"),
+)
+BY_NAME = {s.name: s for s in SPECS}
+
+
+class ParamError(ValueError):
+    pass
+
+
+def validate(name: str, value: float) -> float:
+    """The value to store, or ParamError saying why not (unknown name, not finite, out of range, not whole)."""
+    spec = BY_NAME.get(name)
+    if spec is None:
+        raise ParamError(f"{name}: unknown parameter")
+    if not math.isfinite(value):
+        raise ParamError(f"{name}: {value} is not a number")
+    if not spec.lo <= value <= spec.hi:
+        raise ParamError(f"{name}: {value:g} outside {spec.lo:g}..{spec.hi:g}")
+    if spec.integer:
+        if value != int(value):
+            raise ParamError(f"{name}: {value:g} must be a whole number")
+        return float(int(value))
+    return float(value)
+
+
+class BadLine(ValueError):
+    """A .parm line that is not ``NAME VALUE`` with a valid value: its line number and what is wrong."""
+
+    def __init__(self, line: int, what: str) -> None:
+        super().__init__(what)
+        self.line, self.what = line, what
+
+
+def parse_lines(text: str) -> dict[str, float]:
+    """The values of a .parm text, or BadLine(line, what) at the first line that is not ``NAME VALUE``."""
+    out: dict[str, float] = {}
+    for n, raw in enumerate(text.splitlines(), 1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        parts = line.replace(",", " ").split()
+        if len(parts) != 2:
+            raise BadLine(n, f"expected 'NAME VALUE', got {raw.strip()!r}")
+        try:
+            value = float(parts[1])
+        except ValueError:
+            raise BadLine(n, f"{parts[1]!r} is not a number") from None
+        try:
+            out[parts[0]] = validate(parts[0], value)
+        except ParamError as e:
+            raise BadLine(n, str(e)) from None
+    return out
+
+
+def parse_parm(text: str, source: str = "<parm>") -> dict[str, float]:
+    """MAVProxy/ArduPilot .parm: ``NAME VALUE`` (or ``NAME,VALUE``) per line, ``#`` comments."""
+    try:
+        return parse_lines(text)
+    except BadLine as e:
+        raise ParamError(f"{source}:{e.line}: {e.what}") from None
+
+
+def format_parm(values: dict[str, float]) -> str:
+    lines = ["# returnlink parameters (MAVProxy/ArduPilot .parm format)"]
+    for s in SPECS:
+        if s.name in values:
+            v = values[s.name]
+            lines.append(f"{s.name:<16} {int(v) if s.integer else f'{v:g}'}")
+    return "\n".join(lines) + "\n"
