@@ -183,16 +183,7 @@ class Fuzzer:
 
     @staticmethod
     def _owned_pair(seed: int) -> Pair:
-        from gcs.plans import parse_spec
-
-        pair = Pair(seed=seed % 1000 + 1)
-        pair.connect()
-        p = pair.gs.acquire()
-        tr = pair.gs.upload(parse_spec("rtl:30 | loiter:5 | launch"))
-        pair.until(lambda: p.done and tr.done, 3, "acquire and upload")
-        a = pair.gs.arm()
-        pair.until(lambda: a.done, 2, "arm")
-        return pair
+        return Pair(seed=seed % 1000 + 1).take_control("rtl:30 | loiter:5 | launch")
 
     def _watch(self) -> None:
         """Record every message id the vehicle dispatches."""

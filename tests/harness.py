@@ -62,3 +62,19 @@ class Pair:
 
     def connect(self) -> None:
         self.until(lambda: self.gs.vehicle.status is not None, 3, "LEASE_STATUS")
+
+    def take_control(self, plan: str | None = None, arm: bool = True) -> Pair:
+        """Connect, acquire the root with the first station, upload ``plan`` (a gcs plan spec) if given and arm;
+        every answer must be a success."""
+        from gcs.plans import parse_spec
+
+        self.connect()
+        p = self.gs.acquire()
+        tr = self.gs.upload(parse_spec(plan)) if plan is not None else None
+        self.until(lambda: p.done and (tr is None or tr.done), 3, "acquire and upload")
+        assert p.ok and (tr is None or tr.ok), "could not take control"
+        if arm:
+            a = self.gs.arm()
+            self.until(lambda: a.done, 2, "arm ACK")
+            assert a.ok, "arm refused"
+        return self

@@ -24,13 +24,8 @@ OTHER = Key(bytes(range(100, 132)))
 def keyed(intruders=(255,), stations=(255,), **options) -> Pair:
     """A keyed vehicle, the owner (255) holding the key and in control, and intruders without it."""
     pair = Pair(stations=stations, vehicle_key=KEY, keys={s: KEY for s in stations}, intruders=intruders, **options)
-    pair.connect()
-    p = pair.gs.acquire()
-    pair.until(lambda: p.done, 2, "ACK")
-    assert p.ok and pair.vehicle.book.owner == 255
-    a = pair.gs.arm()
-    pair.until(lambda: a.done, 2, "arm ACK")
-    assert a.ok
+    pair.take_control()
+    assert pair.vehicle.book.owner == 255
     return pair
 
 

@@ -3,7 +3,6 @@ holds still and says so; a message handler raising is counted and reported. Neit
 
 from __future__ import annotations
 
-from gcs.plans import parse_spec
 from tests.harness import Pair
 from vehicle import app
 from vehicle.app import State
@@ -12,12 +11,7 @@ from vehicle.mavlink import mav
 
 
 def returning(pair: Pair) -> Pair:
-    pair.connect()
-    p = pair.gs.acquire()
-    tr = pair.gs.upload(parse_spec("rtl:30 | loiter:5"))
-    pair.until(lambda: p.done and tr.done, 3, "acquire and upload")
-    a = pair.gs.arm()
-    pair.until(lambda: a.done, 2, "arm")
+    pair.take_control("rtl:30 | loiter:5")
     pair.gs.drive_velocity(1.0, 0.0)
     pair.step(6.0)
     pair.gs.stop()

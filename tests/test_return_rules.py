@@ -12,13 +12,7 @@ from vehicle.lease import ExpireReason
 
 
 def acquired(pair: Pair) -> Pair:
-    pair.connect()
-    p = pair.gs.acquire()
-    pair.until(lambda: p.done, 2, "ACK")
-    a = pair.gs.arm()
-    pair.until(lambda: a.done, 2, "arm ACK")
-    assert p.ok and a.ok
-    return pair
+    return pair.take_control()
 
 
 def reasons(pair: Pair, since: float = 0.0) -> list[tuple[float, ExpireReason]]:
