@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 
 from gcs.station import GroundStation, Pending, Transfer, mav
-from vehicle.missions import Item
+from link.mission import Item
 
 STALE_TELEMETRY = 1.0  # s: an operator stops pushing the stick when the picture freezes
 WAYPOINT_RADIUS = 1.5  # m

@@ -18,25 +18,22 @@ from pathlib import Path
 
 from link import dialect
 from link.command_params import check_command, command_name, command_values
-from link.plan_items import MISSION_FRAME, MISSION_INVALID_PARAM, NAV_RETURN_TO_LINK, ItemError, ItemFault
+from link.mission import Item, Origin, item_from_message
+from link.plan_items import (
+    MISSION_FRAME,
+    MISSION_INVALID_PARAM,
+    NAV_RETURN_TO_LINK,
+    ItemError,
+    ItemFault,
+    position_scale,
+)
 from link.plan_items import values as item_values
 from link.signing import MAX_TIMESTAMP, Key, Streams, advance, enable, sim_stamp, timestamp_of
 from link.signing import Verdict as SignVerdict
 from vehicle.app import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, Vehicle, velocity_to_command
 from vehicle.keystore import STAMP_SAVE_EVERY, KeyStore, boot_stamp
 from vehicle.lease import Check, RejectReason, Verdict
-from vehicle.missions import (
-    ACCEPTED,
-    DENIED,
-    INVALID,
-    UNSUPPORTED,
-    Item,
-    MissionServer,
-    Origin,
-    item_from_message,
-    position_scale,
-    to_plan,
-)
+from vehicle.missions import ACCEPTED, DENIED, INVALID, UNSUPPORTED, MissionServer, to_plan
 from vehicle.modes import decode_mode
 from vehicle.params import SPECS, ParamError, save_parm
 from vehicle.retries import RetryWindow, command_key

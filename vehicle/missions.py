@@ -11,12 +11,10 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from link.mission import EARTH_R, Item, Origin, item_from_message  # noqa: F401 - re-exported
-from link.plan_items import (  # noqa: F401 - re-exported for existing importers
+from link.mission import Item, Origin
+from link.plan_items import (
     GLOBAL_FRAMES,
-    LOCAL_FRAMES,
     MAX_DISPLACEMENT,
-    MISSION_FRAME,
     NAV_WAYPOINT,
     ItemError,
     ItemFault,

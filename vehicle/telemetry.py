@@ -10,9 +10,9 @@ import math
 from collections.abc import Callable
 
 from link import dialect
+from link.mission import Origin
 from vehicle.app import State, Vehicle
 from vehicle.lease import Holder
-from vehicle.missions import Origin
 from vehicle.modes import AVAILABLE_MODES, custom_mode, standard_mode
 
 mav = dialect.load()
