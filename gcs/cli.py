@@ -11,7 +11,7 @@ import argparse
 import os
 import sys
 
-from gcs.commands import Context, UsageError, add_commands, execute, find, status_text  # noqa: F401 - status_text
+from gcs.commands import Context, UsageError, add_commands, execute, find
 from link import args as types
 
 
