@@ -91,8 +91,6 @@ def _run(args: argparse.Namespace) -> int:
         return execute(Context(None, sys.stdout), args)  # type: ignore[arg-type] - needs no vehicle
     if command is not None:
         command.check(args, False)  # a bad plan file or a drive without SECONDS: exit 2 before any link opens
-    if path == "map" and not 0 <= args.port <= 65535:
-        raise UsageError(f"--port {args.port}: a TCP port is 0..65535 (0: any free port)")
     try:
         with _open_client(args) as c:
             c.connect(args.timeout)

@@ -63,10 +63,6 @@ class Track:
             half = MAX_POINTS // 2
             self.points = self.points[:half:2] + self.points[half:]
 
-    def silent_for(self, t: float) -> float | None:
-        """Seconds since the last position report (None before the first)."""
-        return None if self.last is None else t - self.last.t
-
 
 def return_route(track: Track, position: tuple[float, float], start: tuple[float, float] | None,
                  target: tuple[float, float] | None, max_displacement: float) -> list[tuple[float, float]]:

@@ -102,6 +102,13 @@ def test_drive_refused_while_awaiting_claim_exits_1_and_says_claim(served, capsy
     assert main([*url, "drive", "0.5", "0", "1"]) == 0
 
 
+def test_a_file_that_cannot_be_written_is_a_message_and_exit_2(served, tmp_path, capsys):
+    url = ["gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}"]
+    for command in (["plan", "download"], ["param", "save"]):
+        assert main([*url, *command, str(tmp_path / "no" / "such" / "file")]) == 2
+        assert "cannot write" in capsys.readouterr().err
+
+
 def test_unknown_parameter_is_named_not_a_time_out(served, capsys):
     url = ["gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}"]
     assert main([*url, "param", "get", "NO_SUCH_PARAM"]) == 1
