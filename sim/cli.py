@@ -169,8 +169,8 @@ def _cmd_sim_replay(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from sim import metrics, report
-    from sim.campaign.store import TRIALS_FILE, read_rows
-    from sim.campaign.trial import simulate, trial_from_row
+    from sim.campaign.store import JSON_METRICS, TRIALS_FILE, read_rows
+    from sim.campaign.trial import same_metrics, simulate, trial_from_row
     from sim.runner import write_metrics, write_tlog
     from vehicle.storage import StoredFileError
 
@@ -207,12 +207,10 @@ def _cmd_sim_replay(args: argparse.Namespace) -> int:
     if row["status"] == "error":
         print(f"returnlink: the stored row is an error ({row.get('error')}); nothing to compare", file=sys.stderr)
         return 0 if m["passed"] else 1
-    stored = {k: (json.loads(v) if isinstance(v, str) and k in ("lease_events", "failures", "loss_position",
-                                                                "rest_position", "blocks") else v)
+    stored = {k: (json.loads(v) if isinstance(v, str) and k in JSON_METRICS else v)
               for k, v in row.items() if k in m}
     fresh = json.loads(json.dumps({k: m[k] for k in stored}))
-    differ = [k for k in stored if k not in ("scenario", "vehicle", "seed", "policy", "real_time_factor")
-              and stored[k] != fresh[k]]
+    differ = [k for k in same_metrics(stored, fresh) if k not in ("scenario", "vehicle", "seed", "policy")]
     if differ:
         print(f"returnlink: error: replay differs from the stored trial in {', '.join(differ)}", file=sys.stderr)
         return 1

@@ -83,7 +83,6 @@ class Store:
         if self.path.exists():
             for r in read_rows(self.path):
                 self.rows[r["trial_id"]] = r
-        self._unsaved = 0
         self._saved_at = time.monotonic()
 
     def pending(self, trials: Iterable[Trial]) -> list[Trial]:
@@ -92,7 +91,6 @@ class Store:
 
     def add(self, row: dict) -> None:
         self.rows[row["trial_id"]] = row
-        self._unsaved += 1
         if time.monotonic() - self._saved_at >= FLUSH_EVERY_S:
             self.flush()
 
@@ -101,7 +99,7 @@ class Store:
         buf = io.BytesIO()
         pq.write_table(to_table(self.rows.values()), buf, compression="zstd")
         write_atomic(self.path, buf.getvalue())
-        self._unsaved, self._saved_at = 0, time.monotonic()
+        self._saved_at = time.monotonic()
         return self.path
 
     def write_summary(self) -> Path:

@@ -16,12 +16,6 @@ from dataclasses import dataclass, replace
 
 from sim.policies import DEFAULT_POLICY
 
-# the §7 keys added compatibly after the first set; read with .get() so a row has them whether or not the
-# metrics of this build compute them
-EXTRA_KEYS = ("policy", "loss_position", "rest_position", "rest_link_quality", "link_cycles", "regained_by",
-              "collisions_during_return", "return_speed_mps", "blocks")
-STATUSES = ("ok", "failed", "error")
-
 
 @dataclass(frozen=True)
 class Trial:

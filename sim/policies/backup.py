@@ -19,12 +19,9 @@ from vehicle.app import Vehicle
 
 
 class Backup(Baseline):
-    halts_on_regain = True
-
     def __init__(self) -> None:
         super().__init__()
         self.driver: PathDriver | None = None
-        self.stopped_on_link = 0  # ticks it stood still because the link was good
         self.after_loss = True  # False: an operator's RTL over a good link, which backs up the whole trail
 
     def begin(self, vehicle: Vehicle, t: float, x: float, y: float) -> None:
@@ -38,7 +35,6 @@ class Backup(Baseline):
     def tick(self, vehicle: Vehicle, t: float, x: float, y: float, yaw: float) -> Command:
         assert self.driver is not None
         if self.after_loss and vehicle.link_is_good:
-            self.stopped_on_link += 1
             self.driver.last_progress_at = t  # standing still on purpose is not being stuck
             return 0.0, 0.0, None
         return self.driver.step(vehicle, t, x, y, yaw)

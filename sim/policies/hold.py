@@ -15,7 +15,5 @@ from vehicle.app import Vehicle
 
 
 class Hold(Baseline):
-    halts_on_regain = True
-
     def tick(self, vehicle: Vehicle, t: float, x: float, y: float, yaw: float) -> Command:
         return 0.0, 0.0, None
