@@ -21,8 +21,7 @@ import statistics
 import threading
 import time
 
-import numpy as np
-
+from link.radio import subsystem_rng
 from sim.driver import SimDriver
 from sim.runner import Run
 from sim.scenario import load
@@ -103,7 +102,7 @@ def profile_table(kind: str) -> list[tuple[str, float]]:
 def floor(run: Run) -> float:
     """CPU seconds for the same ticks with only the robot, its sensors and the estimator."""
     sc = run.scenario
-    driver = SimDriver(sc, run.kind, np.random.default_rng(run.seed))
+    driver = SimDriver(sc, run.kind, subsystem_rng(run.seed, "robot"), subsystem_rng(run.seed, "sensors"))
     x, y, yaw = sc.start
     est = Estimator(x, y, yaw, 0.0, pos_std=0.3, yaw_std=0.02)
     t = 0.0
@@ -111,7 +110,7 @@ def floor(run: Run) -> float:
     for speed, yaw_rate in run.trace.cmd:
         t = round(t + DT, 9)
         r = driver.read(t, DT)
-        est.predict(r.speed, r.yaw_rate, t)
+        est.predict(r.speed, r.yaw_rate, t, r.accel)  # as the vehicle tick calls it, slip check included
         if r.heading is not None:
             est.heading(r.heading, r.heading_std)
         if r.fix is not None:

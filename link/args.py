@@ -68,7 +68,5 @@ def url(text: str) -> str:
     kind, sep, rest = text.partition(":")
     if not sep or kind not in ("udpin", "udpout"):
         raise argparse.ArgumentTypeError(f"{text!r} is not udpin:HOST:PORT or udpout:HOST:PORT")
-    host, port = address(rest)
-    if kind == "udpin":
-        LISTEN_PORT(str(port))
+    address(rest)  # a port of 1..65535, for udpin as for udpout
     return text

@@ -14,9 +14,7 @@ from link.plan_items import KINDS, NAV_RETURN_TO_LINK, UNUSED, FieldRange
 mav = dialect.load()
 
 MSG_ID = FieldRange("message id", 0, 2**24 - 1, integer=True)
-SWITCH = FieldRange("0 or 1", 0, 1, integer=True)
 OPTIONAL_SWITCH = FieldRange("0 or 1", 0, 1, integer=True, nan=0.0)
-BYTE = FieldRange("0..255", 0, 255, integer=True)
 
 
 def _params(*fields: FieldRange) -> tuple[FieldRange, ...]:
