@@ -20,14 +20,12 @@ from link import dialect
 from link.command_params import check_command, command_name, command_values
 from link.mission import Item, Origin, item_from_message
 from link.plan_items import (
-    MISSION_FRAME,
     MISSION_INVALID_PARAM,
     NAV_RETURN_TO_LINK,
     ItemError,
     ItemFault,
     position_scale,
 )
-from link.plan_items import values as item_values
 from link.signing import MAX_TIMESTAMP, Key, Streams, advance, enable, sim_stamp, timestamp_of
 from link.signing import Verdict as SignVerdict
 from vehicle.app import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, Vehicle, velocity_to_command
@@ -324,9 +322,9 @@ class Endpoint:
 
     def _cmd_return_to_link(self, p, sender, scomp, t):
         """MAV_CMD_NAV_RETURN_TO_LINK as a command: run this one return block now, keep the stored plan."""
-        # the parameters were checked against link.plan_items.KINDS by _command, as an uploaded item is
-        v = item_values(NAV_RETURN_TO_LINK, MISSION_FRAME, p)
-        item = PlanItem(NAV_RETURN_TO_LINK, v[0], v[1], v[2], v[3], v[4])
+        # _command already checked the parameters against link.plan_items.KINDS and filled NaN with "use the
+        # parameter" values (command_values), exactly as an uploaded item is
+        item = PlanItem(NAV_RETURN_TO_LINK, *p[:5])
         return self._verdict(self.vehicle.return_now((item,), sender, scomp, t), "return to link", sender)
 
     def _cmd_set_mode(self, p, sender, scomp, t):

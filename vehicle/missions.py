@@ -15,6 +15,7 @@ from link.mission import Item, Origin
 from link.plan_items import (
     GLOBAL_FRAMES,
     MAX_DISPLACEMENT,
+    MISSION_INVALID_PARAM,
     NAV_WAYPOINT,
     ItemError,
     ItemFault,
@@ -27,7 +28,6 @@ from vehicle.service import PlanItem
 ITEM_TIMEOUT = 0.5  # s before an item is requested again
 ITEM_RETRIES = 5
 MAX_ITEMS = 500
-MAX_WAYPOINT_DISTANCE = MAX_DISPLACEMENT  # m from the origin
 
 # MAV_MISSION_RESULT
 ACCEPTED, ERROR, UNSUPPORTED_FRAME, UNSUPPORTED, NO_SPACE, INVALID = 0, 1, 2, 3, 4, 5
@@ -52,9 +52,10 @@ def to_plan(items: tuple[Item, ...], origin: Origin) -> tuple[PlanItem, ...]:
         x, y = p[4], p[5]
         if it.command == NAV_WAYPOINT and it.frame in GLOBAL_FRAMES:
             x, y = origin.to_local(x, y)
-            if math.hypot(x, y) > MAX_WAYPOINT_DISTANCE:
-                raise ItemError(it.seq, ItemFault(5, 10, f"WAYPOINT at {math.hypot(x, y):.0f} m from the origin: "
-                                                         f"at most {MAX_WAYPOINT_DISTANCE:g} m"))
+            if math.hypot(x, y) > MAX_DISPLACEMENT:
+                raise ItemError(it.seq, ItemFault(5, MISSION_INVALID_PARAM[5],
+                                                  f"WAYPOINT at {math.hypot(x, y):.0f} m from the origin: "
+                                                  f"at most {MAX_DISPLACEMENT:g} m"))
         out.append(PlanItem(it.command, p[0], p[1], p[2], p[3], x, y, it.seq))
     return tuple(out)
 
