@@ -1,4 +1,4 @@
-"""Fingerprints of two fixed lockstep runs, the yardstick of the speed work: a faster tick must not change a single
+"""Fingerprints of fixed lockstep runs, the yardstick of the speed work: a faster tick must not change a single
 lease event, true or estimated position, or MAVLink byte.
 
 ``python tests/golden_runs.py`` rewrites ``tests/golden/*.json``; do that only for a change that is meant to alter
@@ -14,8 +14,10 @@ import sys
 from pathlib import Path
 
 GOLDEN = Path(__file__).parent / "golden"
-# (scenario, vehicle, seed, simulated seconds): one rover and one legged run over different worlds
-CASES = [("tunnel", "rover", 1, None), ("warehouse", "legged", 2, None)]
+# (scenario, vehicle, seed, simulated seconds): both robots over different worlds, the benchmark's own run, and
+# returns that go on past a dead zone (culvert) and turn in rooms (building)
+CASES = [("tunnel", "rover", 1, None), ("warehouse", "legged", 2, None), ("tunnel", "legged", 1, None),
+         ("culvert", "rover", 3, None), ("building", "legged", 4, None)]
 
 
 def _digest(values) -> str:

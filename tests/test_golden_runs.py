@@ -1,5 +1,5 @@
-"""The speed work changes how a tick is computed, never what it computes: two fixed runs (tunnel rover seed 1,
-warehouse legged seed 2), recorded before that work, must come out bit for bit the same: every metric but the
+"""The speed work changes how a tick is computed, never what it computes: the fixed runs of ``CASES``, recorded before
+that work, must come out bit for bit the same: every metric but the
 wall-clock real_time_factor, every true and estimated position, every command, lease state and .tlog byte."""
 
 from __future__ import annotations
