@@ -4,6 +4,11 @@ It only knows what a real operator's screen shows (telemetry and lease status th
 never the simulator's truth: it takes control, uploads the return plan, arms, drives the route by steering the
 reported position toward each waypoint, stops pushing when its telemetry goes stale, and when the vehicle is
 back and waiting for a claim it claims the fresh lease and drives the resume route.
+
+Like a person, it learns from a lost link: a place it was driving toward when the link died is tried again, but
+after ``attempts`` losses on the way there it gives that place up and goes on with the rest of its route. Without
+that, a script would drive back into the same dead zone for as long as the scenario lasts, and every loss the
+run counts would be the script's, not the vehicle's (``attempts = 1000`` keeps that stubborn operator).
 """
 
 from __future__ import annotations
@@ -29,7 +34,8 @@ class Leg:
 
 
 class Operator:
-    def __init__(self, gs: GroundStation, route, resume_route, plan: list[Item], teleop: str = "velocity") -> None:
+    def __init__(self, gs: GroundStation, route, resume_route, plan: list[Item], teleop: str = "velocity",
+                 attempts: int = 2) -> None:
         self.gs = gs
         self.plan = plan
         self.teleop = teleop
@@ -39,6 +45,12 @@ class Operator:
         self.pending: Pending | None = None
         self.transfer: Transfer | None = None
         self.claims = 0
+        self.attempts = attempts
+        self.heading_to: tuple[float, float] | None = None  # the waypoint being driven toward
+        # the one being driven toward at the latest sign of a loss (the picture froze, or the vehicle said it lost
+        # us); it counts once the vehicle is back and waits for a claim
+        self.cut_off: tuple[float, float] | None = None
+        self.losses: dict[tuple[float, float], int] = {}  # waypoint -> links lost on the way there
         self.log: list[tuple[float, str]] = []
 
     def _say(self, t: float, text: str) -> None:
@@ -79,6 +91,9 @@ class Operator:
         if st is None:
             return
         if st.state == mav.RETURNLINK_STATE_AWAITING_CLAIM and st.owner == gs.sysid and fresh:
+            if self.cut_off is not None:  # the link died on the way there: the vehicle came back without it
+                self.losses[self.cut_off] = self.losses.get(self.cut_off, 0) + 1
+                self.cut_off = None
             if self.pending is None or self.pending.done:
                 self.pending = gs.claim(-1)
                 self.claims += 1
@@ -87,9 +102,12 @@ class Operator:
                     self.phase = "resuming"
             return
         if not fresh:
+            self.cut_off = self.heading_to or self.cut_off  # the latest sign of a loss names the place
             gs.stop_streaming()  # the picture froze: stop pushing the stick
             return
         if st.state != mav.RETURNLINK_STATE_TELEOP or st.owner != gs.sysid:
+            if st.state == mav.RETURNLINK_STATE_RETURNING and st.last_reason == mav.LEASE_EXPIRE_REASON_COMMS_LOST:
+                self.cut_off = self.heading_to or self.cut_off  # the vehicle lost us and is coming back
             gs.stop()
             return
         if self.phase == "driving" and self.leg.done and self.claims:
@@ -105,10 +123,18 @@ class Operator:
         if v.position is None:
             return
         x, y, speed = leg.points[leg.index]
+        if self.losses.get((x, y), 0) >= self.attempts:  # lost the link on the way there often enough: give it up
+            leg.index += 1
+            self.heading_to = None
+            if leg.done:
+                gs.stop()
+            return
+        self.heading_to = (x, y)
         dn, de = x - v.position[0], y - v.position[1]
         d = math.hypot(dn, de)
         if d < WAYPOINT_RADIUS:
             leg.index += 1
+            self.heading_to = None
             if leg.done:
                 gs.stop()
             return

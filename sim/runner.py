@@ -113,7 +113,8 @@ class Run:
             gs = GroundStation(s.sysid, 190)
             self.stations[s.name] = StationSim(s.name, gs, (s.x, s.y), s.power_dbm, s.name == sc.operator_station)
         op = self.stations[sc.operator_station]
-        op.operator = Operator(op.gs, sc.route, sc.resume_route, from_plan_items(sc.plan), sc.teleop)
+        op.operator = Operator(op.gs, sc.route, sc.resume_route, from_plan_items(sc.plan), sc.teleop,
+                                   attempts=sc.attempts)
         self.events = sorted(sc.events, key=lambda e: e.t)
         self.jams: list[tuple[float, float, str]] = []  # (from, until, station or "")
         self.t = 0.0

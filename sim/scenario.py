@@ -100,6 +100,7 @@ class Scenario:
     route: tuple[tuple[float, float, float], ...]
     resume_route: tuple[tuple[float, float, float], ...]
     plan: tuple[PlanItem, ...]
+    attempts: int = 2  # operator.attempts: how often the operator drives toward a place where the link died
     params: dict[str, float] = field(default_factory=dict)
     events: tuple[Event, ...] = ()
     criteria: Criteria = Criteria()
@@ -295,7 +296,8 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
     start_raw = r.table(raw, "start", "start", ("position", "yaw_deg"))
     sx, sy = r.point(r.get(start_raw, "position", "start.position", list), "start.position")
     syaw = math.radians(r.number(start_raw, "yaw_deg", "start.yaw_deg", 0.0, -360, 360))
-    op = r.table(raw, "operator", "operator", ("station", "teleop", "route", "resume_route", "plan", "params"))
+    op = r.table(raw, "operator", "operator", ("station", "teleop", "route", "resume_route", "plan", "params",
+                                                  "attempts"))
     op_station = r.get(op, "station", "operator.station", str, stations[0].name)
     if op_station not in {s.name for s in stations}:
         raise r.fail("operator.station", f"no station named {op_station!r}")
@@ -303,6 +305,9 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
     if teleop not in ("velocity", "manual"):
         raise r.fail("operator.teleop", f"must be velocity or manual, got {teleop!r}")
     route = r.points(op, "route", "operator.route", n=3, min_len=1)
+    attempts = r.get(op, "attempts", "operator.attempts", int, 2)
+    if not 1 <= attempts <= 1000:
+        raise r.fail("operator.attempts", f"must be in [1, 1000], got {attempts}")
     resume = r.points(op, "resume_route", "operator.resume_route", n=3, min_len=1) if "resume_route" in op else ()
     for p in (*route, *resume):
         if not 0 < p[2] <= 5:
@@ -373,6 +378,7 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
         seed=seed, vehicle=vehicle, bounds=tuple(float(c) for c in b),
         walls=tuple(walls), denied=denied, stations=tuple(stations), radio=RadioParams(**radio_kw),
         start=(sx, sy, syaw), operator_station=op_station, teleop=teleop, route=route, resume_route=resume,
+        attempts=attempts,
         plan=tuple(plan), params=params, events=tuple(sorted(events, key=lambda e: e.t)), criteria=crit,
     )
 

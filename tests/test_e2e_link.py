@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 import sim
 from sim import metrics
@@ -68,8 +69,9 @@ def test_tunnel_return_goes_on_to_where_the_link_really_is(tmp_path):
 def test_weak_radio_cycles_are_the_operators_not_the_vehicles(tmp_path):
     """The tunnel at -20 dBm: the link dies 25 m in. Each return ends where the link is back (LINK_REGAINED, never
     parked at a dead target), and a new loss only follows the operator driving back in: no cycle of the
-    vehicle's own making, however often the scripted operator retries its route."""
-    path = variant(tmp_path, "tunnel", "tunnel-weak", {"power_dbm = 20.0": "power_dbm = -20.0"})
+    vehicle's own making, however often a stubborn operator retries its route."""
+    stubborn = {"power_dbm = 20.0": "power_dbm = -20.0", 'teleop = "velocity"': 'teleop = "velocity"\nattempts = 1000'}
+    path = variant(tmp_path, "tunnel", "tunnel-stubborn", stubborn)
     r, m = mission(str(path))
     got = events(m)
     returns = list(r.blocks)
@@ -92,3 +94,17 @@ def test_weak_radio_cycles_are_the_operators_not_the_vehicles(tmp_path):
     for b in returns:
         assert b.distance <= 10.0, (b.index, b.distance)
     assert math.isfinite(m["distance_back_m"])
+    assert m["link_cycles"] > 2  # the stubborn operator keeps trying: what the next test's operator learns from
+
+
+@pytest.mark.parametrize("vehicle", ["rover", "legged"])
+def test_weak_radio_settles_after_two_cycles(tmp_path, vehicle):
+    """The same weak tunnel with an operator who learns (the default: a place where the link died twice is given
+    up): the loss cycles settle at two, each return ends LINK_REGAINED a few metres back, and the mission passes."""
+    path = variant(tmp_path, "tunnel", "tunnel-weak", {"power_dbm = 20.0": "power_dbm = -20.0",
+                                                       'vehicle = "rover"': f'vehicle = "{vehicle}"'})
+    r, m = mission(str(path))
+    assert 1 <= m["link_cycles"] <= 2, m["link_cycles"]
+    assert [b.reason for b in r.blocks] == ["LINK_REGAINED"] * m["link_cycles"]
+    assert sum(b.distance for b in r.blocks) <= 15.0, [b.distance for b in r.blocks]
+    assert m["regained_by"] == "return" and m["passed"], m.get("failures")

@@ -105,6 +105,8 @@ FULL = GOOD.replace('attenuation_db = "loud"', "attenuation_db = 3").replace(
     (("points = [[1, 1], [2, 2]]", "points = [[1, 1], [1, 1]]"), "world.walls[0].points", "zero length"),
     (("max_displacement = 50", "max_displacement = 50, target = 1.5"), "operator.plan[0].target", "whole number"),
     (("time = 5", "time = -1"), "operator.plan[1].time", "within"),
+    (("[operator]", "[operator]\nattempts = 0"), "operator.attempts", "[1, 1000]"),
+    (("[operator]", "[operator]\nattempts = 2.5"), "operator.attempts", "must be int"),
     (("[operator]", "[[events]]\nt = 3\naction = \"param\"\nname = \"NOPE\"\n[operator]"), "events[0].name",
      "no vehicle parameter"),
     (("[operator]", "[criteria]\nchain_reasons = [\"DONE\"]\n[operator]"), "criteria.chain_reasons",
