@@ -27,6 +27,7 @@ import numpy as np
 from sim.policies.base import Baseline, Command, PathDriver, return_speed
 from vehicle.app import Vehicle
 from vehicle.lease import ExpireReason, Holder
+from vehicle.trail import _douglas_peucker, _seg_dist
 
 SRTL_ACCURACY = 2.0  # m
 SRTL_POINTS = 300
@@ -35,36 +36,18 @@ SRTL_FULL_TIMEOUT = 15.0  # s full before deactivating
 FS_TIMEOUT = 1.5  # s a failsafe condition must last before its action
 
 
-def _seg_seg_dist(p1, p2, q1, q2) -> float:
-    def pt_seg(p, a, b):
-        ab = b - a
-        L2 = float(ab @ ab)
-        u = 0.0 if L2 == 0 else min(1.0, max(0.0, float((p - a) @ ab) / L2))
-        return float(np.hypot(*(p - a - u * ab)))
-
-    return min(pt_seg(p1, q1, q2), pt_seg(p2, q1, q2), pt_seg(q1, p1, p2), pt_seg(q2, p1, p2))
+def _seg_seg_dist(p1: tuple[float, float], p2: tuple[float, float], q1: tuple[float, float],
+                  q2: tuple[float, float]) -> float:
+    """Closest distance of two segments that do not cross (SmartRTL's loop test), with the trail's point-segment
+    distance."""
+    return min(_seg_dist(*p1, *q1, *q2), _seg_dist(*p2, *q1, *q2), _seg_dist(*q1, *p1, *p2), _seg_dist(*q2, *p1, *p2))
 
 
-def _rdp(pts: list[np.ndarray], tol: float) -> list[np.ndarray]:
+def _rdp(pts: list[tuple[float, float]], tol: float) -> list[tuple[float, float]]:
+    """Ramer-Douglas-Peucker with the trail's implementation (no anchors but the two ends)."""
     if len(pts) < 3:
         return pts
-    keep = [False] * len(pts)
-    keep[0] = keep[-1] = True
-    stack = [(0, len(pts) - 1)]
-    while stack:
-        a, b = stack.pop()
-        best, idx = 0.0, -1
-        ab = pts[b] - pts[a]
-        L2 = float(ab @ ab)
-        for k in range(a + 1, b):
-            ap = pts[k] - pts[a]
-            u = 0.0 if L2 == 0 else min(1.0, max(0.0, float(ap @ ab) / L2))
-            d = float(np.hypot(*(ap - u * ab)))
-            if d > best:
-                best, idx = d, k
-        if best > tol:
-            keep[idx] = True
-            stack += [(a, idx), (idx, b)]
+    keep = _douglas_peucker(np.array(pts), tol, np.zeros(len(pts), dtype=bool))
     return [p for p, k in zip(pts, keep, strict=True) if k]
 
 
@@ -74,7 +57,7 @@ class SmartRTLPath:
     def __init__(self, accuracy: float = SRTL_ACCURACY, max_points: int = SRTL_POINTS,
                  timeout: float = SRTL_FULL_TIMEOUT) -> None:
         self.accuracy, self.max_points, self.timeout = accuracy, max_points, timeout
-        self.points: list[np.ndarray] = []
+        self.points: list[tuple[float, float]] = []
         self.active = True
         self.deactivated_at: float | None = None
         self._next_sample = 0.0
@@ -85,8 +68,8 @@ class SmartRTLPath:
         if not self.active or t < self._next_sample:
             return
         self._next_sample = t + 1.0 / SRTL_SAMPLE_HZ
-        p = np.array([x, y])
-        if self.points and math.hypot(*(p - self.points[-1])) <= self.accuracy:
+        p = (float(x), float(y))
+        if self.points and math.dist(p, self.points[-1]) <= self.accuracy:
             return
         if len(self.points) >= self.max_points:
             self._cleanup()
@@ -102,7 +85,7 @@ class SmartRTLPath:
 
     def restart(self, x: float, y: float) -> None:
         """The path begins again at ``(x, y)`` (home at arming, or where a return left the vehicle)."""
-        self.points = [np.array([x, y], dtype=float)]
+        self.points = [(float(x), float(y))]
         self._full_since = None
 
     def thorough_cleanup(self) -> None:
@@ -183,10 +166,10 @@ class SmartRTL(Baseline):
         self.acted.append(t)
         if self.path.active and self.path.points:
             self.path.thorough_cleanup()
-            pts = [np.array([x, y])] + self.path.points[::-1]
+            pts = [(x, y)] + self.path.points[::-1]
         else:
             self.fallback = True
-            pts = [np.array([x, y]), np.asarray(vehicle.home, dtype=float)]
+            pts = [(x, y), (float(vehicle.home[0]), float(vehicle.home[1]))]
         self.route = np.array(pts)
         self.target = (float(self.route[-1, 0]), float(self.route[-1, 1]))
         self.driver = PathDriver(self.route, return_speed(vehicle), t)
