@@ -287,3 +287,23 @@ def test_sim_run_flies_the_policy_named_on_the_command_line(tmp_path, capsys):
     assert m["policy"] == "hold" and [b["command"] for b in m["blocks"]] == ["HOLD"]
     assert code == (0 if m["passed"] else 1)
     assert "--policy hold" in capsys.readouterr().out
+
+
+def test_baseline_path_driver_keeps_the_navigators_reverse_hysteresis():
+    """A baseline drives with the navigator as the return service does, direction hysteresis included: once it
+    backs up a route that lies behind, a route 90 degrees off (inside the 80-100 degree band) keeps it backing up
+    instead of flipping to forward and swinging the other way round."""
+    from types import SimpleNamespace
+
+    from sim.policies.base import PathDriver
+    from vehicle.params import load_defaults
+
+    vehicle = SimpleNamespace(params=load_defaults())  # the driver reads only the vehicle's parameters
+    driver = PathDriver(np.array([[0.0, 0.0], [-10.0, 0.0]]), 1.0, 0.0)
+    speed, _, _ = driver.step(vehicle, 0.02, 0.0, 0.0, 0.0)  # facing north, the route runs south: back up
+    assert speed < 0
+    # facing west, the route 90 degrees off: it turns in place either way, but backing up it swings its tail
+    # toward the route (counter-clockwise) where a flip to forward would swing its nose (clockwise)
+    speed, yaw_rate, _ = driver.step(vehicle, 0.04, -0.02, 0.0, math.radians(-90.0))
+    assert speed == 0.0 and yaw_rate > 0, "the direction flipped inside the hysteresis band"
+    assert driver.reverse

@@ -28,6 +28,7 @@ class PathDriver:
         self.path = Path(points) if len(points) >= 2 else None
         self.speed = speed
         self.progress = 0.0
+        self.reverse = False  # the follower's direction, passed back in as the service does (its hysteresis)
         self.best_remaining = math.inf
         self.last_progress_at = t
 
@@ -35,8 +36,8 @@ class PathDriver:
         if self.path is None:
             return 0.0, 0.0, ExpireReason.COMPLETED
         cmd = follow(self.path, x, y, yaw, self.progress, self.speed,
-                     FollowerConfig(arrive_radius=vehicle.params["RTL_ARRIVE_R"]))
-        self.progress = cmd.progress
+                     FollowerConfig(arrive_radius=vehicle.params["RTL_ARRIVE_R"]), self.reverse)
+        self.progress, self.reverse = cmd.progress, cmd.reverse
         if cmd.arrived:
             return 0.0, 0.0, ExpireReason.COMPLETED
         if cmd.remaining < self.best_remaining - 0.2:
