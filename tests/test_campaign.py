@@ -15,7 +15,7 @@ import pytest
 from sim.campaign import sweep
 from sim.campaign.executors import SerialExecutor
 from sim.campaign.spec import MAX_TRIALS, SpecError, load_spec, parse_spec
-from sim.campaign.store import Store, summary
+from sim.campaign.store import FLUSH_EVERY_S, FLUSH_SHARE, Store, next_flush_gap, summary
 from sim.campaign.trial import Trial, run_trial, simulate, trial_id
 from sim.cli import main
 from tests.campaign_helpers import TUNNEL, jam_scenario, quick_row, write_spec
@@ -338,3 +338,33 @@ def test_sweep_into_a_finished_campaign_runs_nothing_and_rewrites_the_report(jam
     assert "all 1 trials of" in capsys.readouterr().err
     assert pq.read_table(out / "trials.parquet").to_pylist() == before
     assert trial.id in (out / "report.md").read_text()
+
+
+def test_the_trials_file_is_rewritten_less_often_as_it_grows(tmp_path, monkeypatch):
+    """A rewrite that took 1 s (a large campaign) is not repeated for FLUSH_SHARE seconds; a cheap one every
+    FLUSH_EVERY_S: rewriting the whole file on a fixed gap would make a long campaign's bookkeeping quadratic."""
+    from sim.campaign import store as store_module
+
+    now = [0.0]
+    slow = [0.0]  # what a rewrite costs on the fake clock
+    real_write = store_module.write_atomic
+
+    def write(path, data):
+        now[0] += slow[0]
+        real_write(path, data)
+
+    monkeypatch.setattr(store_module, "write_atomic", write)
+    store = Store(tmp_path, clock=lambda: now[0])
+    store.add(row(0))
+    assert not (tmp_path / "trials.parquet").exists()  # nothing due yet
+    now[0] = FLUSH_EVERY_S
+    slow[0] = 1.0
+    store.add(row(1))  # due: written, and it took 1 s
+    assert len(pq.read_table(tmp_path / "trials.parquet")) == 2
+    now[0] += FLUSH_EVERY_S
+    store.add(row(2))
+    assert len(pq.read_table(tmp_path / "trials.parquet")) == 2  # the fixed gap is not enough any more
+    now[0] += FLUSH_SHARE * 1.0 - FLUSH_EVERY_S
+    store.add(row(3))
+    assert len(pq.read_table(tmp_path / "trials.parquet")) == 4
+    assert next_flush_gap(0.01) == FLUSH_EVERY_S

@@ -1,6 +1,7 @@
 """Where a campaign's results live: ``DIR/trials.parquet`` (one row per trial) and ``DIR/summary.csv``.
 
-The parquet file is the campaign's memory: it is rewritten atomically every few seconds while trials finish, so a
+The parquet file is the campaign's memory: it is rewritten atomically every few seconds while trials finish (less
+often as it grows, so rewriting it never costs more than a twentieth of the time; see ``next_flush_gap``), so a
 sweep stopped at any moment (Ctrl-C, a crash, a lost machine) resumes where it was by running it again into the
 same DIR: trials with a row ``ok`` or ``failed`` are skipped, ``error`` rows are run again. A file that cannot be
 read is reported and left alone, never replaced by an empty campaign.
@@ -26,6 +27,7 @@ from vehicle.storage import StoredFileError, write_atomic
 TRIALS_FILE = "trials.parquet"
 SUMMARY_FILE = "summary.csv"
 FLUSH_EVERY_S = 5.0
+FLUSH_SHARE = 20.0  # the gap between rewrites is at least this many times what the last rewrite cost
 
 INPUTS = [("trial_id", pa.string()), ("scenario", pa.string()), ("source", pa.string()),
           ("scenario_text", pa.string()), ("vehicle", pa.string()), ("seed", pa.int64()),
@@ -73,17 +75,27 @@ def read_rows(path: Path) -> list[dict]:
     return table.to_pylist()
 
 
+def next_flush_gap(cost_s: float) -> float:
+    """Seconds until the next rewrite of the trials file, after one that took ``cost_s``: every FLUSH_EVERY_S while
+    the file is small, and FLUSH_SHARE times the rewrite's cost once it is large, so a campaign of 100,000 rows
+    spends at most 1/FLUSH_SHARE of its driver's time rewriting (a fixed gap would make that quadratic); what a
+    crash loses is at most one gap of finished trials, which a resume runs again."""
+    return max(FLUSH_EVERY_S, FLUSH_SHARE * cost_s)
+
+
 class Store:
     """The rows of one campaign directory, keyed by trial id, written back atomically."""
 
-    def __init__(self, out: Path) -> None:
+    def __init__(self, out: Path, clock=time.monotonic) -> None:
         self.out = Path(out)
+        self.clock = clock
         self.path = self.out / TRIALS_FILE
         self.rows: dict[str, dict] = {}
         if self.path.exists():
             for r in read_rows(self.path):
                 self.rows[r["trial_id"]] = r
-        self._saved_at = time.monotonic()
+        self._saved_at = clock()
+        self._gap = FLUSH_EVERY_S
 
     def pending(self, trials: Iterable[Trial]) -> list[Trial]:
         """The trials still to run: never run, or whose last run ended in an error."""
@@ -91,15 +103,17 @@ class Store:
 
     def add(self, row: dict) -> None:
         self.rows[row["trial_id"]] = row
-        if time.monotonic() - self._saved_at >= FLUSH_EVERY_S:
+        if self.clock() - self._saved_at >= self._gap:
             self.flush()
 
     def flush(self) -> Path:
+        began = self.clock()
         self.out.mkdir(parents=True, exist_ok=True)
         buf = io.BytesIO()
         pq.write_table(to_table(self.rows.values()), buf, compression="zstd")
         write_atomic(self.path, buf.getvalue())
-        self._saved_at = time.monotonic()
+        self._saved_at = self.clock()
+        self._gap = next_flush_gap(self._saved_at - began)
         return self.path
 
     def write_summary(self) -> Path:
