@@ -31,6 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 
 MOTION_GRAIN = 0.05  # m
+_US_RANK = struct.Struct("<qI").pack  # what a packet's fate hash reads: send time (µs) and rank at that time
+_THREE_WORDS = struct.Struct("<QQQ").unpack
 
 
 @dataclass(frozen=True)
@@ -78,6 +80,7 @@ class Radio:
         self.seed = seed
         self.rng = subsystem_rng(seed, "radio.packets")  # the stream of callers that name none
         self._streams: dict[str, bytes] = {}  # the fate key of each link direction
+        self._hashers: dict[str, object] = {}  # each direction's hash, keyed, before any packet
         self._rank: dict[str, tuple[int, int]] = {}  # (time in µs, rank) of each direction's last packet
         # the shadowing field is a function of place, seeded once from its own stream
         self._field_seed = int(subsystem_seed(seed, "radio.shadowing").generate_state(1)[0])
@@ -138,6 +141,14 @@ class Radio:
             key = self._streams[name] = words.tobytes()
         return key
 
+    def _fate_hash(self, name: str):
+        """The keyed hash of stream ``name`` before any packet: keying BLAKE2b costs a whole compression of the
+        key block, so each packet copies this state instead of keying a fresh one (the digest is the same)."""
+        h = self._hashers.get(name)
+        if h is None:
+            h = self._hashers[name] = hashlib.blake2b(digest_size=24, key=self._fate_key(name))
+        return h
+
     def _uniforms(self, name: str, t: float) -> tuple[float, float, float]:
         """Three uniforms in (0, 1) for the next packet of stream ``name`` sent at time ``t``: a hash of the
         stream's key, the time (µs) and the packet's rank among that stream's packets at that time. A packet's
@@ -147,8 +158,9 @@ class Radio:
         last, rank = self._rank.get(name, (None, 0))
         rank = rank + 1 if last == us else 0
         self._rank[name] = (us, rank)
-        h = hashlib.blake2b(struct.pack("<qI", us, rank), digest_size=24, key=self._fate_key(name)).digest()
-        a, b, c = struct.unpack("<QQQ", h)
+        h = self._fate_hash(name).copy()
+        h.update(_US_RANK(us, rank))
+        a, b, c = _THREE_WORDS(h.digest())
         return (a + 0.5) / 2.0**64, (b + 0.5) / 2.0**64, (c + 0.5) / 2.0**64
 
     def packet(self, state: LinkState, stream: str | None = None, t: float | None = None) -> float | None:
@@ -162,6 +174,9 @@ class Radio:
             u, jitter = self.rng.random(), self.rng.normal()
         else:
             u, u1, u2 = self._uniforms(stream, t)
+            if u >= state.delivery:  # lost: its latency is never looked at, so it is not computed
+                self.lost += 1
+                return None
             jitter = math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)  # Box-Muller
         if u >= state.delivery:
             self.lost += 1
