@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import pymunk
 
-from sim.world import ROBOT, World
+from sim.world import ROBOT, ROBOT_FILTER, World
 
 # pymunk's Body routes every attribute write through a Python ``__setattr__`` before the property: the tick
 # calls the property's own setter instead (the same chipmunk call, half the cost)
@@ -47,6 +47,7 @@ class Robot:
         self.body.angle = yaw
         self.shape = pymunk.Circle(self.body, radius)
         self.shape.collision_type = ROBOT
+        self.shape.filter = ROBOT_FILTER  # collides as before; lines of sight for the radio pass through it
         self.shape.friction = 0.3
         world.space.add(self.body, self.shape)
         self.space = world.space
