@@ -85,6 +85,7 @@ class Radio:
         # the shadowing field is a function of place, seeded once from its own stream
         self._field_seed = int(subsystem_seed(seed, "radio.shadowing").generate_state(1)[0])
         self._cells: dict[tuple[int, int], float] = {}
+        self._corners: dict[tuple[int, int], tuple[float, float, float, float]] = {}  # a grid square's 4 cells
         self._last: dict[tuple, tuple[tuple[float, float], LinkState]] = {}
         self._lane_last: dict[object, float] = {}  # per direction: when its last packet arrives
         self.sent = 0
@@ -108,8 +109,13 @@ class Radio:
         i, j = math.floor(gx), math.floor(gy)
         u, v = gx - i, gy - j
         su, sv = u * u * (3 - 2 * u), v * v * (3 - 2 * v)  # smoothstep: no creases at cell edges
-        top = self._cell(i, j) * (1 - su) + self._cell(i + 1, j) * su
-        bottom = self._cell(i, j + 1) * (1 - su) + self._cell(i + 1, j + 1) * su
+        corners = self._corners.get((i, j))
+        if corners is None:  # a robot stays in a grid square for many channel updates: look its corners up once
+            corners = self._corners[(i, j)] = (self._cell(i, j), self._cell(i + 1, j), self._cell(i, j + 1),
+                                               self._cell(i + 1, j + 1))
+        c00, c10, c01, c11 = corners
+        top = c00 * (1 - su) + c10 * su
+        bottom = c01 * (1 - su) + c11 * su
         # bilinear blending shrinks the spread between grid points; scale it back to roughly shadowing_db
         return self.p.shadowing_db * 1.4 * (top * (1 - sv) + bottom * sv)
 

@@ -22,15 +22,17 @@ _SET_VELOCITY = pymunk.Body.velocity.fset
 _SET_ANGULAR_VELOCITY = pymunk.Body.angular_velocity.fset
 
 
+def _clamp(v: float, lo: float, hi: float) -> float:
+    """``max(lo, min(hi, v))`` exactly (ties, signed zeros and NaN alike), without two builtin calls a tick."""
+    v = v if v < hi else hi
+    return v if v > lo else lo
+
+
 def _approach(current: float, target: float, max_step: float) -> float:
-    """``current`` moved toward ``target`` by at most ``max_step`` (> 0): the value
-    ``current + max(-max_step, min(max_step, target - current))`` gives, without the two builtin calls."""
+    """``current`` moved toward ``target`` by at most ``max_step``."""
     d = target - current
-    if d > max_step:
-        d = max_step
-    elif d < -max_step:
-        d = -max_step
-    return current + d
+    d = d if d < max_step else max_step
+    return current + (d if d > -max_step else -max_step)
 
 
 class Robot:
@@ -61,8 +63,8 @@ class Robot:
         self._pose = (float(x), float(y), float(self.body.angle))  # as of the last physics step
 
     def command(self, speed: float, yaw_rate: float) -> None:
-        self.cmd_speed = max(-self.max_speed, min(self.max_speed, speed))
-        self.cmd_yaw_rate = max(-self.max_yaw_rate, min(self.max_yaw_rate, yaw_rate))
+        self.cmd_speed = _clamp(speed, -self.max_speed, self.max_speed)
+        self.cmd_yaw_rate = _clamp(yaw_rate, -self.max_yaw_rate, self.max_yaw_rate)
 
     def limits(self, speed: float, yaw_rate: float) -> tuple[float, float]:
         """Extra model-specific limits (the quadruped's stride and step frequency)."""
@@ -196,12 +198,12 @@ class Legged(Robot):
         s = self.spec
         # choose the step frequency for this speed, then clamp speed to what the stride allows at that frequency
         need_hz = 2.0 * abs(speed) / max(1e-6, self.max_stride)
-        self.step_hz = max(s.min_step_hz, min(s.max_step_hz, need_hz))
+        self.step_hz = _clamp(need_hz, s.min_step_hz, s.max_step_hz)
         cap = self.max_stride * self.step_hz / 2.0
-        speed = max(-cap, min(cap, speed))
+        speed = _clamp(speed, -cap, cap)
         # turning also uses up stride: the outer feet travel further
         turn_cap = s.max_yaw_rate * max(0.3, 1.0 - abs(speed) / (self.max_speed + 1e-6))
-        return speed, max(-turn_cap, min(turn_cap, yaw_rate))
+        return speed, _clamp(yaw_rate, -turn_cap, turn_cap)
 
     def after_step(self, dt: float) -> None:
         super().after_step(dt)
