@@ -80,7 +80,7 @@ class Radio:
         self.seed = seed
         self.rng = subsystem_rng(seed, "radio.packets")  # the stream of callers that name none
         self._streams: dict[str, bytes] = {}  # the fate key of each link direction
-        self._hashers: dict[str, object] = {}  # each direction's hash, keyed, before any packet
+        self._hashers: dict[str, hashlib.blake2b] = {}  # each direction's hash, keyed, before any packet
         self._rank: dict[str, tuple[int, int]] = {}  # (time in µs, rank) of each direction's last packet
         # the shadowing field is a function of place, seeded once from its own stream
         self._field_seed = int(subsystem_seed(seed, "radio.shadowing").generate_state(1)[0])
@@ -147,7 +147,7 @@ class Radio:
             key = self._streams[name] = words.tobytes()
         return key
 
-    def _fate_hash(self, name: str):
+    def _fate_hash(self, name: str) -> hashlib.blake2b:
         """The keyed hash of stream ``name`` before any packet: keying BLAKE2b costs a whole compression of the
         key block, so each packet copies this state instead of keying a fresh one (the digest is the same)."""
         h = self._hashers.get(name)
