@@ -7,7 +7,7 @@ with other work, and CPU time is what one core of a campaign pays. Each figure i
 The round trip is wall time by nature (a ground station waits for it), measured against the same ``Server`` class
 `returnlink sim serve` runs, in a thread of this process, on a perfect link.
 
-    python benchmarks/sitl_bench.py [--repeat 3] [--no-profile] [--no-roundtrip]
+    python benchmarks/sitl_bench.py [--repeat 3] [--kind rover|legged] [--no-profile] [--no-roundtrip]
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ MINUTES = 10.0
 # DESIGN §8 (Quality bars, Performance): the lockstep tunnel run at >= 300x real time on one core, in CPU time.
 TARGET_X = 300.0
 ROUND_TRIPS = 120
+KINDS = ("rover", "legged")
 ROUND_TRIP_TARGET_MS = 20.0  # DESIGN §8: the COMMAND_ACK leaves in the tick the command came in (20 ms at 50 Hz)
 
 # Where a profiled function's own time is booked: the first prefix of its file path that matches. Helpers that
@@ -120,6 +121,34 @@ def floor(run: Run) -> float:
     return time.process_time() - c0
 
 
+def physics(run: Run) -> tuple[float, float]:
+    """CPU seconds for the same ticks with the robot's physics alone (command, contact push, pymunk step, body
+    read-back), and for pymunk's ``Space.step`` alone in those ticks: the library call no Python change can make
+    cheaper. Each is timed on a run of its own so the clock reads do not land in the other figure."""
+    sc = run.scenario
+    driver = SimDriver(sc, run.kind, subsystem_rng(run.seed, "robot"), subsystem_rng(run.seed, "sensors"))
+    c0 = time.process_time()
+    for speed, yaw_rate in run.trace.cmd:
+        driver.command(speed, yaw_rate)
+        driver.advance(DT)
+    whole = time.process_time() - c0
+    driver = SimDriver(sc, run.kind, subsystem_rng(run.seed, "robot"), subsystem_rng(run.seed, "sensors"))
+    robot, space = driver.robot, driver.world.space
+    steps = []
+    for speed, yaw_rate in run.trace.cmd:
+        robot.command(speed, yaw_rate)
+        robot.before_step(DT)
+        c0 = time.process_time()
+        space.step(DT)
+        steps.append(time.process_time() - c0)
+        robot.after_step(DT)
+    empty = []  # what the pair of clock reads costs by itself, taken off each step
+    for _ in range(len(steps)):
+        c0 = time.process_time()
+        empty.append(time.process_time() - c0)
+    return whole, max(0.0, sum(steps) - sum(empty))
+
+
 def timed_run(kind: str) -> tuple[Run, float]:
     run = Run(load("tunnel"), kind, duration=MINUTES * 60)
     c0 = time.process_time()
@@ -171,27 +200,38 @@ def round_trips(n: int = ROUND_TRIPS) -> list[float]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3, help="runs per robot; the median is shown")
+    ap.add_argument("--kind", choices=KINDS, action="append",
+                    help="robot to measure (repeatable); both when not given")
     ap.add_argument("--no-profile", action="store_true")
     ap.add_argument("--no-roundtrip", action="store_true")
     args = ap.parse_args()
+    if args.repeat < 1:
+        ap.error("--repeat must be at least 1")
+    kinds = args.kind or list(KINDS)
     print(f"tunnel, {MINUTES:g} simulated minutes, 50 Hz, CPU time of one core, median of {args.repeat} runs; "
           f"aim {TARGET_X:g}x (DESIGN §8)")
     print(f"{'vehicle':<8} {'us/tick':>8} {'x real':>7} {'floor us':>9} {'floor x':>8} {'full/floor':>10} "
-          f"{'frames':>7} {'vs aim':>7}   runs (us/tick)")
-    for kind in ("rover", "legged"):
-        full, base, frames = [], [], 0
+          f"{'frames':>7} {'vs aim':>7} {'physics':>8} {'pymunk':>7}   runs (us/tick)")
+    for kind in kinds:
+        full, base, phys, lib, frames = [], [], [], [], 0
         for _ in range(args.repeat):
             run, cpu = timed_run(kind)
             ticks = len(run.trace.t)
             full.append(1e6 * cpu / ticks)
             base.append(1e6 * floor(run) / ticks)
+            whole, step = physics(run)
+            phys.append(1e6 * whole / ticks)
+            lib.append(1e6 * step / ticks)
             frames = run.bus.delivered
         us, fl = statistics.median(full), statistics.median(base)
         x = 1e6 * DT / us
         print(f"{kind:<8} {us:8.1f} {x:7.0f} {fl:9.1f} {1e6 * DT / fl:8.0f} {us / fl:10.2f} {frames:7d} "
-              f"{x / TARGET_X:6.2f}x   {' '.join(f'{v:.1f}' for v in full)}")
+              f"{x / TARGET_X:6.2f}x {statistics.median(phys):8.1f} {statistics.median(lib):7.1f}   "
+              f"{' '.join(f'{v:.1f}' for v in full)}")
+    print("floor: physics, sensors and estimator alone; physics: the robot's physics step alone; pymunk: its "
+          "Space.step alone (the library's own floor)")
     if not args.no_profile:
-        for kind in ("rover", "legged"):
+        for kind in kinds:
             print(f"\nwhere the {kind}'s tick goes (cProfile own time, helpers booked to their callers):")
             for name, share in profile_table(kind):
                 if share >= 0.003:

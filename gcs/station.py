@@ -23,6 +23,7 @@ COMMAND_TRIES = 4
 TELEOP_PERIOD = 0.1  # s: teleop is streamed at 10 Hz
 TRANSFER_TIMEOUT = 1.5
 TRANSFER_TRIES = 4
+_UNRESOLVED = object()  # a message type whose handler has not been looked up yet
 
 
 @dataclass(frozen=True)
@@ -155,6 +156,7 @@ class GroundStation:
         self.teleop: tuple[str, float, float, float] | None = None  # (kind, a, b, c) streamed at 10 Hz
         self.next_teleop = 0.0
         self.listeners: list[Callable[[object, float], None]] = []
+        self._handlers: dict[str, Callable[[object, float], None] | None] = {}  # message type -> its _on_ method
         self.t = 0.0
 
     # pymavlink writes encoded frames here
@@ -188,10 +190,13 @@ class GroundStation:
                     p.tries += 1
                     p.sent_at = t
                     self._send_command(p, confirmation=p.tries - 1)
-        self._transfer_tick(t)
+        if self.transfer is not None and not self.transfer.done:
+            self._transfer_tick(t)
         if self.teleop is not None and t >= self.next_teleop:
             self.next_teleop = t + TELEOP_PERIOD
             self._send_teleop()
+        if not self.frames:  # most ticks send nothing
+            return []
         out, self.frames = self.frames, []
         return out
 
@@ -336,7 +341,9 @@ class GroundStation:
         ts = getattr(m, "target_system", 0)
         if ts not in (0, self.sysid) and kind not in ("LEASE_STATUS",):
             return
-        handler = getattr(self, f"_on_{kind.lower()}", None)
+        handler = self._handlers.get(kind, _UNRESOLVED)
+        if handler is _UNRESOLVED:  # the first message of a kind names its handler; later ones look it up
+            handler = self._handlers[kind] = getattr(self, f"_on_{kind.lower()}", None)
         if handler is not None:
             handler(m, t)
         for fn in self.listeners:

@@ -31,6 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 
 MOTION_GRAIN = 0.05  # m
+_US_RANK = struct.Struct("<qI").pack  # what a packet's fate hash reads: send time (µs) and rank at that time
+_THREE_WORDS = struct.Struct("<QQQ").unpack
 
 
 @dataclass(frozen=True)
@@ -78,10 +80,12 @@ class Radio:
         self.seed = seed
         self.rng = subsystem_rng(seed, "radio.packets")  # the stream of callers that name none
         self._streams: dict[str, bytes] = {}  # the fate key of each link direction
+        self._hashers: dict[str, hashlib.blake2b] = {}  # each direction's hash, keyed, before any packet
         self._rank: dict[str, tuple[int, int]] = {}  # (time in µs, rank) of each direction's last packet
         # the shadowing field is a function of place, seeded once from its own stream
         self._field_seed = int(subsystem_seed(seed, "radio.shadowing").generate_state(1)[0])
         self._cells: dict[tuple[int, int], float] = {}
+        self._corners: dict[tuple[int, int], tuple[float, float, float, float]] = {}  # a grid square's 4 cells
         self._last: dict[tuple, tuple[tuple[float, float], LinkState]] = {}
         self._lane_last: dict[object, float] = {}  # per direction: when its last packet arrives
         self.sent = 0
@@ -105,8 +109,13 @@ class Radio:
         i, j = math.floor(gx), math.floor(gy)
         u, v = gx - i, gy - j
         su, sv = u * u * (3 - 2 * u), v * v * (3 - 2 * v)  # smoothstep: no creases at cell edges
-        top = self._cell(i, j) * (1 - su) + self._cell(i + 1, j) * su
-        bottom = self._cell(i, j + 1) * (1 - su) + self._cell(i + 1, j + 1) * su
+        corners = self._corners.get((i, j))
+        if corners is None:  # a robot stays in a grid square for many channel updates: look its corners up once
+            corners = self._corners[(i, j)] = (self._cell(i, j), self._cell(i + 1, j), self._cell(i, j + 1),
+                                               self._cell(i + 1, j + 1))
+        c00, c10, c01, c11 = corners
+        top = c00 * (1 - su) + c10 * su
+        bottom = c01 * (1 - su) + c11 * su
         # bilinear blending shrinks the spread between grid points; scale it back to roughly shadowing_db
         return self.p.shadowing_db * 1.4 * (top * (1 - sv) + bottom * sv)
 
@@ -138,6 +147,14 @@ class Radio:
             key = self._streams[name] = words.tobytes()
         return key
 
+    def _fate_hash(self, name: str) -> hashlib.blake2b:
+        """The keyed hash of stream ``name`` before any packet: keying BLAKE2b costs a whole compression of the
+        key block, so each packet copies this state instead of keying a fresh one (the digest is the same)."""
+        h = self._hashers.get(name)
+        if h is None:
+            h = self._hashers[name] = hashlib.blake2b(digest_size=24, key=self._fate_key(name))
+        return h
+
     def _uniforms(self, name: str, t: float) -> tuple[float, float, float]:
         """Three uniforms in (0, 1) for the next packet of stream ``name`` sent at time ``t``: a hash of the
         stream's key, the time (µs) and the packet's rank among that stream's packets at that time. A packet's
@@ -147,8 +164,9 @@ class Radio:
         last, rank = self._rank.get(name, (None, 0))
         rank = rank + 1 if last == us else 0
         self._rank[name] = (us, rank)
-        h = hashlib.blake2b(struct.pack("<qI", us, rank), digest_size=24, key=self._fate_key(name)).digest()
-        a, b, c = struct.unpack("<QQQ", h)
+        h = self._fate_hash(name).copy()
+        h.update(_US_RANK(us, rank))
+        a, b, c = _THREE_WORDS(h.digest())
         return (a + 0.5) / 2.0**64, (b + 0.5) / 2.0**64, (c + 0.5) / 2.0**64
 
     def packet(self, state: LinkState, stream: str | None = None, t: float | None = None) -> float | None:
@@ -162,6 +180,9 @@ class Radio:
             u, jitter = self.rng.random(), self.rng.normal()
         else:
             u, u1, u2 = self._uniforms(stream, t)
+            if u >= state.delivery:  # lost: its latency is never looked at, so it is not computed
+                self.lost += 1
+                return None
             jitter = math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)  # Box-Muller
         if u >= state.delivery:
             self.lost += 1

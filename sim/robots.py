@@ -14,11 +14,25 @@ from dataclasses import dataclass
 import numpy as np
 import pymunk
 
-from sim.world import ROBOT, World
+from sim.world import ROBOT, ROBOT_FILTER, World
+
+# pymunk's Body routes every attribute write through a Python ``__setattr__`` before the property: the tick
+# calls the property's own setter instead (the same chipmunk call, half the cost)
+_SET_VELOCITY = pymunk.Body.velocity.fset
+_SET_ANGULAR_VELOCITY = pymunk.Body.angular_velocity.fset
+
+
+def _clamp(v: float, lo: float, hi: float) -> float:
+    """``max(lo, min(hi, v))`` exactly (ties, signed zeros and NaN alike), without two builtin calls a tick."""
+    v = v if v < hi else hi
+    return v if v > lo else lo
 
 
 def _approach(current: float, target: float, max_step: float) -> float:
-    return current + max(-max_step, min(max_step, target - current))
+    """``current`` moved toward ``target`` by at most ``max_step``."""
+    d = target - current
+    d = d if d < max_step else max_step
+    return current + (d if d > -max_step else -max_step)
 
 
 class Robot:
@@ -35,6 +49,7 @@ class Robot:
         self.body.angle = yaw
         self.shape = pymunk.Circle(self.body, radius)
         self.shape.collision_type = ROBOT
+        self.shape.filter = ROBOT_FILTER  # collides as before; lines of sight for the radio pass through it
         self.shape.friction = 0.3
         world.space.add(self.body, self.shape)
         self.space = world.space
@@ -45,10 +60,11 @@ class Robot:
         self.odometer = 0.0
         self.true_speed = 0.0
         self.accel = 0.0  # true forward acceleration of the body (what an accelerometer feels), m/s^2
+        self._pose = (float(x), float(y), float(self.body.angle))  # as of the last physics step
 
     def command(self, speed: float, yaw_rate: float) -> None:
-        self.cmd_speed = max(-self.max_speed, min(self.max_speed, speed))
-        self.cmd_yaw_rate = max(-self.max_yaw_rate, min(self.max_yaw_rate, yaw_rate))
+        self.cmd_speed = _clamp(speed, -self.max_speed, self.max_speed)
+        self.cmd_yaw_rate = _clamp(yaw_rate, -self.max_yaw_rate, self.max_yaw_rate)
 
     def limits(self, speed: float, yaw_rate: float) -> tuple[float, float]:
         """Extra model-specific limits (the quadruped's stride and step frequency)."""
@@ -58,7 +74,7 @@ class Robot:
         speed, yaw_rate = self.limits(self.cmd_speed, self.cmd_yaw_rate)
         self.speed = _approach(self.speed, speed, self.max_accel * dt)
         self.yaw_rate = _approach(self.yaw_rate, yaw_rate, self.max_yaw_accel * dt)
-        a = self.body.angle
+        a = self._pose[2]
         vx, vy = self.speed * math.cos(a), self.speed * math.sin(a)
         # a velocity-controlled base pushes against a wall but cannot drive into it: drop the inward component
         for hit in self.space.shape_query(self.shape):
@@ -68,12 +84,15 @@ class Robot:
             into = vx * n.x + vy * n.y
             if into > 0:
                 vx, vy = vx - into * n.x, vy - into * n.y
-        self.body.velocity = (vx, vy)
-        self.body.angular_velocity = self.yaw_rate
+        _SET_VELOCITY(self.body, (vx, vy))
+        _SET_ANGULAR_VELOCITY(self.body, self.yaw_rate)
 
     def after_step(self, dt: float) -> None:
-        vx, vy = self.body.velocity
-        a = self.body.angle
+        body = self.body
+        x, y = body.position
+        vx, vy = body.velocity
+        a = body.angle
+        self._pose = (x, y, a)
         speed = vx * math.cos(a) + vy * math.sin(a)
         self.accel = (speed - self.true_speed) / dt
         self.true_speed = speed
@@ -81,8 +100,9 @@ class Robot:
 
     @property
     def pose(self) -> tuple[float, float, float]:
-        x, y = self.body.position
-        return float(x), float(y), float(self.body.angle)
+        """True (x, y, yaw) as of the last ``after_step``: only a physics step moves the body, and the sensors,
+        the runner and the gait all read it several times a tick."""
+        return self._pose
 
     def odometry_speed(self, dt: float) -> float:
         raise NotImplementedError
@@ -178,12 +198,12 @@ class Legged(Robot):
         s = self.spec
         # choose the step frequency for this speed, then clamp speed to what the stride allows at that frequency
         need_hz = 2.0 * abs(speed) / max(1e-6, self.max_stride)
-        self.step_hz = max(s.min_step_hz, min(s.max_step_hz, need_hz))
+        self.step_hz = _clamp(need_hz, s.min_step_hz, s.max_step_hz)
         cap = self.max_stride * self.step_hz / 2.0
-        speed = max(-cap, min(cap, speed))
+        speed = _clamp(speed, -cap, cap)
         # turning also uses up stride: the outer feet travel further
         turn_cap = s.max_yaw_rate * max(0.3, 1.0 - abs(speed) / (self.max_speed + 1e-6))
-        return speed, max(-turn_cap, min(turn_cap, yaw_rate))
+        return speed, _clamp(yaw_rate, -turn_cap, turn_cap)
 
     def after_step(self, dt: float) -> None:
         super().after_step(dt)

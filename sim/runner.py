@@ -40,6 +40,7 @@ COMMAND_NAMES = {num: name for name, num in PLAN_COMMANDS.items()}
 # A lockstep run has no wall-clock time of its own: its .tlog is stamped from 2026-01-01 00:00:00 UTC + sim time
 # (1970, the UNIX epoch itself, made MAVProxy and QGroundControl show a log from before MAVLink existed).
 TLOG_EPOCH_US = 1_767_225_600 * 1_000_000
+_TLOG_STAMP = struct.Struct(">Q").pack
 
 
 @dataclass
@@ -53,6 +54,13 @@ class StationSim:
     alive: bool
     state: LinkState | None = None
     operator: Operator | None = None
+    # the two directions of its radio link, named once: (source, destination) lane and fate stream
+    down: tuple[tuple[str, str], str] = field(init=False)
+    up: tuple[tuple[str, str], str] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.down = (("vehicle", self.name), f"downlink.{self.name}")
+        self.up = ((self.name, "vehicle"), f"uplink.{self.name}")
 
 
 @dataclass
@@ -112,6 +120,8 @@ class Run:
         for s in sc.stations:
             gs = GroundStation(s.sysid, 190)
             self.stations[s.name] = StationSim(s.name, gs, (s.x, s.y), s.power_dbm, s.name == sc.operator_station)
+        self._station_list = list(self.stations.values())  # the tick walks it four times
+        self._operator = self.stations[sc.operator_station]
         op = self.stations[sc.operator_station]
         op.operator = Operator(op.gs, sc.route, sc.resume_route, from_plan_items(sc.plan), sc.teleop,
                                    attempts=sc.attempts)
@@ -156,44 +166,68 @@ class Run:
         return self
 
     def step(self) -> None:
+        """One tick. Work nothing waits for is skipped (an empty queue, a dead station, a timed event not due
+        yet), never reordered: the radio draws each packet's fate in the same order as ever."""
         self.t = t = round(self.t + DT, 9)
-        v, ep = self.vehicle, self.endpoint
-        for data, _src in self.bus.receive("vehicle", t):
+        v, ep, bus, stations = self.vehicle, self.endpoint, self.bus, self._station_list
+        for data, _src in bus.receive("vehicle", t):
             ep.receive(data, t)
-        for st in self.stations.values():
-            for data, _src in self.bus.receive(st.name, t):
+        for st in stations:
+            for data, _src in bus.receive(st.name, t):
                 if st.alive:
                     st.gs.feed(data, t)
                     if st.operator is not None:
                         self._log_frame(data, t)
-        self._events(t)
-        for st in self.stations.values():
+        if self.events and self.events[0].t <= t + 1e-9:
+            self._events(t)
+        for st in stations:
             if st.alive and st.operator is not None:
                 st.operator.step(t)
-        n_events, heard, was_lost = len(v.event_log), v.book.link.last_heard, v.book.link.lost
+        link = v.book.link
+        n_events, heard, was_lost = len(v.event_log), link.last_heard, link.lost
         v.tick(t)
-        if was_lost and not v.book.link.lost and v.book.owner is not None:
-            self.link_backs.append((t, v.book.link.contact_since))
-        for e in v.event_log[n_events:]:
-            self.announced = (e.epoch, e.current)
-            if e.reason.name == "COMMS_LOST":
-                self.losses.append((e.t, heard))
-            elif e.reason.name == "LINK_REGAINED":
-                self.regains.append((e.t, v.book.link.contact_since))
+        if was_lost:
+            link = v.book.link
+            if not link.lost and v.book.owner is not None:
+                self.link_backs.append((t, link.contact_since))
+        if len(v.event_log) > n_events:
+            for e in v.event_log[n_events:]:
+                self.announced = (e.epoch, e.current)
+                if e.reason.name == "COMMS_LOST":
+                    self.losses.append((e.t, heard))
+                elif e.reason.name == "LINK_REGAINED":
+                    self.regains.append((e.t, v.book.link.contact_since))
         self.driver.advance(DT)
         pos = self.driver.pose[:2]
-        for st in self.stations.values():
-            st.state = self.radio.link(st.antenna, st.power_dbm, pos) if st.alive else None
-        for data in ep.tick(t):
-            for st in self.stations.values():
-                self._transmit(st, "vehicle", st.name, data, t)
-        for st in self.stations.values():
+        radio = self.radio
+        for st in stations:
+            st.state = radio.link(st.antenna, st.power_dbm, pos) if st.alive else None
+        frames = ep.tick(t)
+        if frames:
+            # a station out of range or jammed hears nothing: its fates are not drawn, as before
+            live = [st for st in stations if st.state is not None and not (self.jams and self._jammed(st.name, t))]
+            for data in frames:
+                for st in live:
+                    lane, stream = st.down
+                    at = radio.arrival(st.state, t, lane, stream)
+                    if at is not None:
+                        bus.send("vehicle", st.name, data, at)
+        for st in stations:
             if not st.alive:
                 continue
-            for data in st.gs.tick(t):
-                if st.operator is not None:
+            sent = st.gs.tick(t)
+            if not sent:
+                continue
+            if st.operator is not None:
+                for data in sent:
                     self._log_frame(data, t)
-                self._transmit(st, st.name, "vehicle", data, t)
+            if st.state is None or (self.jams and self._jammed(st.name, t)):
+                continue
+            lane, stream = st.up
+            for data in sent:
+                at = radio.arrival(st.state, t, lane, stream)
+                if at is not None:
+                    bus.send(st.name, "vehicle", data, at)
         if t >= self.next_radio_status:
             self.next_radio_status = t + 1.0
             self._radio_status(t)
@@ -203,14 +237,6 @@ class Run:
         if not self.jams:  # most runs have none: skip the generator on every transmit
             return False
         return any(a <= t < b and (not s or s == station) for a, b, s in self.jams)
-
-    def _transmit(self, st: StationSim, src: str, dst: str, data: bytes, t: float) -> None:
-        if st.state is None or self._jammed(st.name, t):
-            return
-        direction = "downlink" if src == "vehicle" else "uplink"
-        at = self.radio.arrival(st.state, t, (src, dst), f"{direction}.{st.name}")
-        if at is not None:
-            self.bus.send(src, dst, data, at)
 
     def _radio_status(self, t: float) -> None:
         """The operator's telemetry radio reports both ends' RSSI, as a SiK radio would."""
@@ -222,7 +248,7 @@ class Run:
         self._log_frame(data, t)
 
     def _log_frame(self, data: bytes, t: float) -> None:
-        self.tlog.append(struct.pack(">Q", TLOG_EPOCH_US + int(t * 1e6)) + data)
+        self.tlog.append(_TLOG_STAMP(TLOG_EPOCH_US + int(t * 1e6)) + data)
 
     # ----- timed events --------------------------------------------------------------------------------------
     def _events(self, t: float) -> None:
@@ -259,19 +285,27 @@ class Run:
         v, tr = self.vehicle, self.trace
         p = v.estimator.pose
         cur = v.book.current
-        op = self.stations[self.scenario.operator_station]
         tr.t.append(t)
-        tr.true.append((float(pos[0]), float(pos[1])))
+        tr.true.append(pos)  # the robot's pose is plain floats already
         tr.est.append((p.x, p.y))
-        tr.holder.append(int(cur.holder) if cur else 0)
-        tr.index.append(cur.index if cur else -1)
+        if cur is None:
+            tr.holder.append(0)
+            tr.index.append(-1)
+        else:
+            tr.holder.append(int(cur.holder))
+            tr.index.append(cur.index)
         tr.state.append(v.state())
-        jammed = self._jammed(op.name, t)
-        tr.link.append(0.0 if op.state is None or jammed else op.state.delivery)
-        tr.rssi.append(math.nan if op.state is None else op.state.rssi_dbm)
+        state = self._operator.state
+        if state is None:
+            tr.link.append(0.0)
+            tr.rssi.append(math.nan)
+        else:
+            tr.link.append(0.0 if self.jams and self._jammed(self._operator.name, t) else state.delivery)
+            tr.rssi.append(state.rssi_dbm)
         tr.heard.append(v.link_is_good)
         tr.cmd.append(v.command_out)
-        self._audit(v)
+        if v.setpoint is not None:
+            self._audit(v)
         returning = cur is not None and cur.holder is Holder.RETURN_SERVICE
         blk = self.blocks[-1] if self.blocks and self.blocks[-1].ended is None else None
         if blk is not None and (not returning or cur.index != blk.index):

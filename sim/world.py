@@ -11,6 +11,11 @@ from dataclasses import dataclass
 import pymunk
 
 WALL, ROBOT = 1, 2
+# A robot's shape is in a collision category of its own (it still collides with everything), so a line of sight
+# can leave it out: the sight line ends at the robot, and pymunk calls back into Python for every shape it touches
+ROBOT_CATEGORY = 0b10
+ROBOT_FILTER = pymunk.ShapeFilter(categories=ROBOT_CATEGORY)
+_SIGHT = pymunk.ShapeFilter(mask=pymunk.ShapeFilter.ALL_MASKS() ^ ROBOT_CATEGORY)
 
 
 @dataclass(frozen=True)
@@ -76,5 +81,5 @@ class World:
         """Total wall loss along the straight line a -> b (each wall segment crossed counts once)."""
         if a == b:
             return 0.0
-        hits = self.space.segment_query(a, b, 0.0, pymunk.ShapeFilter())
+        hits = self.space.segment_query(a, b, 0.0, _SIGHT)  # walls only (a robot adds no loss)
         return float(sum(getattr(h.shape, "attenuation_db", 0.0) for h in hits if h.shape is not None))

@@ -9,7 +9,7 @@ import pytest
 
 from sim import scenario
 from sim.drive import Rig
-from sim.robots import Legged, Rover
+from sim.robots import Legged, Rover, make_robot
 from sim.world import World
 from vehicle.returning import Target, plan_route
 
@@ -43,6 +43,24 @@ def test_walls_are_real_collisions_and_are_counted():
     assert world.collisions == 1  # one contact, however long it lasts
     assert world.attenuation_db((0.0, 0.0), (10.0, 0.0)) == 10.0
     assert world.attenuation_db((0.0, 0.0), (0.0, 3.0)) == 0.0
+
+
+@pytest.mark.parametrize("kind", ["rover", "legged"])
+def test_the_pose_is_where_the_body_is_after_every_step(kind):
+    """The pose is read back once per physics step; it must never lag the body (against a wall, turning)."""
+    from sim.world import Wall
+
+    world = World((Wall(((3.0, -5.0), (3.0, 5.0)), 0.5, 10.0),))
+    robot = make_robot(kind, world, 0.0, 0.0, 0.3, np.random.default_rng(0))
+    assert robot.pose == (0.0, 0.0, 0.3)
+    for k in range(300):
+        robot.command(1.5, 0.6 if k % 100 < 30 else 0.0)
+        robot.before_step(0.02)
+        world.step(0.02)
+        robot.after_step(0.02)
+        x, y = robot.body.position
+        assert robot.pose == (x, y, robot.body.angle)
+    assert world.collisions >= 1
 
 
 def test_legged_speed_is_bounded_by_stride_and_step_frequency():

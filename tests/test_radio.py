@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+import hashlib
 import math
 import re
+import struct
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from link.radio import Radio, RadioParams, rssi_to_radio_status
+from link.radio import Radio, RadioParams, rssi_to_radio_status, subsystem_seed
 from link.transports import LockstepBus
 from sim import scenario
 
@@ -53,6 +55,19 @@ def test_packet_fates_are_seeded_and_lossy_where_weak():
 def _jittery(reorder: bool) -> RadioParams:
     # jitter far larger than the gap between packets: drawn latencies alone would reorder most neighbours
     return RadioParams(shadowing_db=0.0, latency_ms=20.0, jitter_ms=15.0, reorder=reorder)
+
+
+def test_a_packet_fate_is_the_keyed_hash_of_its_send_time_and_rank():
+    """The fate of a direction's packet is BLAKE2b keyed by that direction, over the send time (µs) and the rank
+    among its packets at that time: the recorded runs hold these values, however the hash is computed."""
+    radio = Radio(RadioParams(), lambda a, b: 0.0, seed=7)
+    keys = {name: subsystem_seed(7, f"radio.{name}").generate_state(4).tobytes()
+            for name in ("uplink.gcs", "downlink.gcs")}
+    sends = [("uplink.gcs", 0.02, 0), ("downlink.gcs", 0.02, 0), ("uplink.gcs", 0.02, 1), ("uplink.gcs", 0.02, 2),
+             ("downlink.gcs", 0.02, 1), ("uplink.gcs", 0.04, 0), ("downlink.gcs", 1.5, 0)]
+    for name, t, rank in sends:
+        digest = hashlib.blake2b(struct.pack("<qI", round(t * 1e6), rank), digest_size=24, key=keys[name]).digest()
+        assert radio._uniforms(name, t) == tuple((w + 0.5) / 2.0**64 for w in struct.unpack("<QQQ", digest))
 
 
 def test_each_direction_keeps_its_order_while_latency_varies():
