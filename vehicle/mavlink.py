@@ -17,6 +17,7 @@ from enum import Enum
 from pathlib import Path
 
 from link import dialect
+from link.codec import read_frames
 from link.command_params import check_command, command_name, command_values
 from link.mission import Item, Origin, item_from_message
 from link.plan_items import (
@@ -196,7 +197,7 @@ class Endpoint:
         """Parse and handle whatever frames ``data`` holds; garbage is counted and dropped. ``source`` (a UDP
         address, opaque here) is remembered per sender, so the transport can keep the owner's (``pinned``)."""
         try:
-            msgs = self.parser.parse_buffer(data) or []
+            msgs = read_frames(self.parser, data)
         except Exception:  # noqa: BLE001 - a hostile byte stream must never take the vehicle down
             self.counters.bad_frames += 1
             self.parser = mav.MAVLink(None, 0, 0)
