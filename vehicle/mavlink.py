@@ -626,6 +626,13 @@ class Endpoint:
     def custom_mode(self) -> int:
         return self.telemetry.custom_mode()
 
+    def replies(self) -> list[bytes]:
+        """The frames produced since the last call or tick (answers to what was received), without running the
+        tick: what a loop serving its link between ticks sends at once."""
+        frames = self._sink.frames
+        self._sink.frames = []
+        return frames
+
     def tick(self, t: float) -> list[bytes]:
         """Announce lease events, send due telemetry, and return every frame produced since the last tick."""
         v = self.vehicle
