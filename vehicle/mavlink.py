@@ -633,8 +633,7 @@ class Endpoint:
         self._sink.frames = []
         return frames
 
-    def tick(self, t: float) -> list[bytes]:
-        """Announce lease events, send due telemetry, and return every frame produced since the last tick."""
+    def _announce(self) -> None:
         v = self.vehicle
         for ev in v.events:
             self.mav.lease_event_send(self.telemetry.boot_ms(ev.t), ev.epoch, wire_index(ev.expired),
@@ -648,6 +647,12 @@ class Endpoint:
             if seq >= 0:
                 self.mav.mission_item_reached_send(seq)
         v.reached.clear()
+
+    def tick(self, t: float) -> list[bytes]:
+        """Announce lease events, send due telemetry, and return every frame produced since the last tick."""
+        v = self.vehicle
+        if v.events or v.notices or v.reached:  # (rarely: most ticks have nothing to announce)
+            self._announce()
         why = self.missions.tick(t)
         if why:
             self.statustext(why, mav.MAV_SEVERITY_WARNING)
