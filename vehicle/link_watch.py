@@ -113,13 +113,23 @@ class Delivery:
         if self.repeats >= STUCK_REPEATS:
             return None
         since = t - window - EPS
-        inside = [u for ta, u in self.arrivals if ta > since]
+        # one pass (twice a packet): how many arrived inside the window, their lowest and highest sequence number,
+        # and the highest one before it (the reference for what was sent since)
+        inside, lo, hi, before = 0, 0, 0, None
+        for ta, u in self.arrivals:
+            if ta > since:
+                if not inside or u < lo:
+                    lo = u
+                if not inside or u > hi:
+                    hi = u
+                inside += 1
+            elif before is None or u > before:
+                before = u
         if not inside:
             return 0.0
-        before = [u for ta, u in self.arrivals if ta <= since]
-        first = max(before) if before else min(inside) - 1
-        sent = max(inside) - first
-        return min(1.0, len(inside) / sent) if sent > 0 else 1.0
+        first = before if before is not None else lo - 1
+        sent = hi - first
+        return min(1.0, inside / sent) if sent > 0 else 1.0
 
 
 def _trim(arrivals: tuple[tuple[float, int], ...], since: float) -> tuple[tuple[float, int], ...]:
