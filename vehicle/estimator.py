@@ -54,7 +54,6 @@ _H_POS = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
 
 
 _H_YAW = np.array([[0.0, 0, 1.0, 0]])
-_H_YAW_T = _H_YAW.T  # the same arrays heading() built on every call (five times a second)
 _I4 = np.eye(4)
 _I4.flags.writeable = False
 
@@ -78,9 +77,9 @@ class Estimator:
         self.fixes_used = 0
         self.fixes_rejected = 0
         self._pose: Pose | None = None
-        # x (4) then P (16, row by row) as floats while only predictions ran since the last update (None: the
-        # filter's arrays hold the state): at 50 Hz between 5 Hz updates, building arrays every tick cost more
-        # than the arithmetic
+        # x (4) then P (16, row by row) as floats while only predictions and headings ran since the last position
+        # fix (None: the filter's arrays hold the state): at 50 Hz between fixes, building arrays every tick cost
+        # more than the arithmetic
         self._state: tuple[float, ...] | None = None
         self.inertial_speed = 0.0
         self.accel_bias = 0.0  # m/s^2, learnt while odometry and accelerometer agree
@@ -138,11 +137,7 @@ class Estimator:
             if trusted != speed:
                 qv_extra = (speed - trusted) ** 2 * dt  # as uncertain as the wheels and the IMU disagree
                 speed = trusted
-        state = self._state
-        if state is None:  # the filter's arrays were last written by an update: read them once
-            f = self._f
-            state = (*f.x[:, 0].tolist(), *(v for row in f.P.tolist() for v in row))
-        (x, y, yaw, b, p00, p01, p02, p03, p10, p11, p12, p13, p20, p21, p22, p23, p30, p31, p32, p33) = state
+        (x, y, yaw, b, p00, p01, p02, p03, p10, p11, p12, p13, p20, p21, p22, p23, p30, p31, p32, p33) = self._values()
         cs, sn = math.cos(yaw), math.sin(yaw)
         a02, a12, a23 = -speed * sn * dt, speed * cs * dt, -dt
         # rows: F P
@@ -162,9 +157,17 @@ class Estimator:
         self.t = t
         self._pose = None
 
+    def _values(self) -> tuple[float, ...]:
+        """x then P as floats: kept from the last prediction, or read from the filter after one of its updates."""
+        state = self._state
+        if state is None:
+            f = self._f
+            state = self._state = (*f.x[:, 0].tolist(), *f.P.ravel().tolist())
+        return state
+
     def _filter(self) -> ExtendedKalmanFilter:
-        """The filter with the state ``predict`` keeps in scalars written back into its arrays, before an update
-        reads them; afterwards the update's arrays are the state again."""
+        """The filter with the state kept in floats written back into its arrays, before filterpy's update reads
+        them; afterwards the update's arrays are the state again."""
         f = self._f
         state = self._state
         if state is not None:
@@ -197,25 +200,26 @@ class Estimator:
         return True
 
     def heading(self, yaw: float, std: float) -> None:
-        """Fuse an absolute heading; the innovation is wrapped so that +-pi is one angle."""
-        f = self._filter()
-        H = _H_YAW
-        S = float(f.P[2, 2]) + std * std
-        innov = (yaw - float(f.x[2, 0]) + math.pi) % (2 * math.pi) - math.pi
-        K = f.P @ _H_YAW_T / S
-        f.x = f.x + K * innov
-        f.P = (_I4 - K @ H) @ f.P
+        """Fuse an absolute heading; the innovation is wrapped so that +-pi is one angle.
+
+        H picks the yaw, so the gain is P's yaw column over S and the state update is four scalars; the covariance
+        update stays the matrix product (I - K H) P, which is what fixes its rounding."""
+        s = self._values()
+        P = np.array(s[4:]).reshape(4, 4)
+        S = s[14] + std * std  # P[2, 2]
+        innov = (yaw - s[2] + math.pi) % (2 * math.pi) - math.pi
+        K = P[:, 2:3] / S  # P H' / S
+        k0, k1, k2, k3 = K[:, 0].tolist()
+        P = (_I4 - K @ _H_YAW) @ P
+        self._state = (s[0] + k0 * innov, s[1] + k1 * innov, s[2] + k2 * innov, s[3] + k3 * innov,
+                       *P.ravel().tolist())
         self._pose = None
 
     @property
     def pose(self) -> Pose:
         if self._pose is None:
-            s = self._state
-            if s is None:
-                x0, x1, x2 = self._f.x[:3, 0].tolist()
-                p00, p11 = float(self._f.P[0, 0]), float(self._f.P[1, 1])
-            else:
-                x0, x1, x2, p00, p11 = s[0], s[1], s[2], s[4], s[9]
+            s = self._values()
+            x0, x1, x2, p00, p11 = s[0], s[1], s[2], s[4], s[9]
             std = math.sqrt(max(0.0, 0.5 * (p00 + p11)))
             yaw = (x2 + math.pi) % (2 * math.pi) - math.pi
             self._pose = Pose(x0, x1, yaw, std, self.t)
