@@ -56,6 +56,8 @@ _H_POS = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
 _H_YAW = np.array([[0.0, 0, 1.0, 0]])
 _I4 = np.eye(4)
 _I4.flags.writeable = False
+_I2 = np.eye(2)
+_I2.flags.writeable = False
 
 
 def _jac_pos(_x: np.ndarray) -> np.ndarray:
@@ -181,7 +183,7 @@ class Estimator:
         """Fuse a position fix; returns False if it was gated out as an outlier."""
         f = self._filter()
         z = np.array([[x], [y]])
-        S = f.P[:2, :2] + np.eye(2) * std * std
+        S = f.P[:2, :2] + _I2 * std * std
         r = z - f.x[:2]
         m2 = float((r.T @ np.linalg.solve(S, r))[0, 0])
         if m2 > self.config.fix_gate**2:
@@ -194,7 +196,7 @@ class Estimator:
             self.divergences += 1
             f.P[:2, :2] = f.P[:2, :2] + r @ r.T
         self.outlier_streak = 0
-        f.update(z, _jac_pos, _h_pos, R=np.eye(2) * std * std)
+        f.update(z, _jac_pos, _h_pos, R=_I2 * std * std)
         self._pose = None
         self.fixes_used += 1
         return True
