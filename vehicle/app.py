@@ -543,6 +543,7 @@ def run(vehicle: Vehicle, endpoint, receive: Callable[[float], list], send: Call
 
 
 def _take(endpoint, items: list, t: float) -> None:
+    """Hand what ``receive`` gave to the endpoint, at time ``t``."""
     for item in items:
         if isinstance(item, tuple):  # (bytes, where they came from): the endpoint learns its owner's address
             endpoint.receive(item[0], t, item[1])
