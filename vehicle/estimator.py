@@ -53,9 +53,6 @@ def _h_pos(x: np.ndarray) -> np.ndarray:
 _H_POS = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
 
 
-_H_YAW = np.array([[0.0, 0, 1.0, 0]])
-_I4 = np.eye(4)
-_I4.flags.writeable = False
 _I2 = np.eye(2)
 _I2.flags.writeable = False
 
@@ -204,15 +201,17 @@ class Estimator:
     def heading(self, yaw: float, std: float) -> None:
         """Fuse an absolute heading; the innovation is wrapped so that +-pi is one angle.
 
-        H picks the yaw, so the gain is P's yaw column over S and the state update is four scalars; the covariance
+        H picks the yaw, so the gain K is P's yaw column over S, the state update is four scalar products, and
+        I - K H is the identity with its yaw column replaced (every other entry is exactly 0 or 1). The covariance
         update stays the matrix product (I - K H) P, which is what fixes its rounding."""
         s = self._values()
-        P = np.array(s[4:]).reshape(4, 4)
         S = s[14] + std * std  # P[2, 2]
         innov = (yaw - s[2] + math.pi) % (2 * math.pi) - math.pi
-        K = P[:, 2:3] / S  # P H' / S
-        k0, k1, k2, k3 = K[:, 0].tolist()
-        P = (_I4 - K @ _H_YAW) @ P
+        k0, k1, k2, k3 = s[6] / S, s[10] / S, s[14] / S, s[18] / S  # P H' / S
+        # (0.0 - k, not -k: the same signed zero as the matrix subtraction when k is zero)
+        i_kh = np.array(((1.0, 0.0, 0.0 - k0, 0.0), (0.0, 1.0, 0.0 - k1, 0.0), (0.0, 0.0, 1.0 - k2, 0.0),
+                         (0.0, 0.0, 0.0 - k3, 1.0)))
+        P = i_kh @ np.array(s[4:]).reshape(4, 4)
         self._state = (s[0] + k0 * innov, s[1] + k1 * innov, s[2] + k2 * innov, s[3] + k3 * innov,
                        *P.ravel().tolist())
         self._pose = None
