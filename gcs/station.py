@@ -13,6 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 from link import dialect
+from link.codec import read_frames
 from link.mission import Item, item_from_message
 from link.signing import Key, Streams, Verdict, advance, enable, sim_stamp
 
@@ -167,7 +168,7 @@ class GroundStation:
     def feed(self, data: bytes, t: float) -> None:
         self.t = t
         try:
-            msgs = self.parser.parse_buffer(data) or []
+            msgs = read_frames(self.parser, data)
         except Exception:  # noqa: BLE001 - a garbled frame must not stop the station
             self.parser = mav.MAVLink(None, 0, 0)
             self.parser.robust_parsing = True

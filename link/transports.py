@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import heapq
+import select
 import socket
 from collections.abc import Callable, Collection
 
@@ -53,6 +54,14 @@ class UdpTransport:
                 self._learn(addr)
             out.append((data, addr))
         return out
+
+    def ready(self, timeout: float) -> bool:
+        """Whether a datagram can be read within ``timeout`` seconds (a loop serving its link between ticks)."""
+        try:
+            readable, _, _ = select.select([self.sock], [], [], max(0.0, timeout))
+        except (OSError, ValueError):  # closed under us: nothing will come
+            return False
+        return bool(readable)
 
     def _learn(self, addr: Address) -> None:
         """Add a peer; when the table is full the oldest address that is not pinned makes room."""

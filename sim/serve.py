@@ -83,12 +83,15 @@ class Server:
                   f"  pos ({p.x:6.1f}, {p.y:6.1f})  link {link}", file=self._out, flush=True)
 
     def serve(self, speedup: float = 1.0, duration: float = float("inf"), stop=lambda: False,
-              report_every: float = 5.0, out=sys.stderr, clock=time.monotonic, sleep=time.sleep) -> None:
-        """Run until ``duration`` simulated seconds or ``stop()``; ``clock`` and ``sleep`` are injectable so a test
-        paces the loop in simulated time."""
+              report_every: float = 5.0, out=sys.stderr, clock=time.monotonic, sleep=time.sleep,
+              wait=None) -> None:
+        """Run until ``duration`` simulated seconds or ``stop()``; ``clock``, ``sleep`` and ``wait`` are injectable
+        so a test paces the loop in simulated time. On the real clock the loop waits on the UDP socket between
+        ticks (``wait`` None) and answers a command as soon as it arrives."""
         self._out, self._report_every, self._next_report = out, report_every, 0.0
         run(self.vehicle, self.endpoint, self._receive, self._send, clock=clock, sleep=sleep, speedup=speedup,
-            stop=lambda: self.vehicle.t >= duration or stop(), after_tick=self._after_tick)
+            stop=lambda: self.vehicle.t >= duration or stop(), after_tick=self._after_tick,
+            wait=self.transport.ready if wait is None and clock is time.monotonic else wait)
 
     def close(self) -> None:
         self.endpoint.close()  # the signing timestamp to disk

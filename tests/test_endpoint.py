@@ -281,3 +281,24 @@ def test_a_cleared_setpoint_is_judged_again_once_its_lease_is_gone():
     assert v.expire(v.book.owner, v.book.epoch, v.book.current.index, t).executes
     assert v.setpoint is sp
     assert v._teleop(t) == (0.0, 0.0) and v.setpoint is None
+
+
+def test_a_lease_change_is_reported_in_the_tick_it_happens():
+    """LEASE_STATUS and CONTROL_STATUS go out in the tick the book changes (an acquire), not at their next slot,
+    even between their periodic slots, and the quiet ticks after it send neither."""
+    pair = Pair()
+    pair.connect()
+    pair.step(0.1)  # off the 2 Hz and 1 Hz slots
+    p = pair.gs.acquire()
+    frames: list[list[str]] = []
+    while not p.done:
+        pair.heard.clear()
+        pair.step()
+        frames.append([pair.endpoint.parser.parse_buffer(f)[0].get_type() for f in pair.heard])
+    acked = frames[-1]
+    assert "COMMAND_ACK" in acked and "LEASE_STATUS" in acked and "CONTROL_STATUS" in acked
+    assert pair.gs.vehicle.status.epoch == pair.vehicle.book.epoch
+    pair.heard.clear()
+    pair.step(0.06)  # three quiet ticks: nothing changed, no slot due
+    quiet = [pair.endpoint.parser.parse_buffer(f)[0].get_type() for f in pair.heard]
+    assert "LEASE_STATUS" not in quiet and "CONTROL_STATUS" not in quiet

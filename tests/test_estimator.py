@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import struct
 
 import numpy as np
 import pytest
@@ -82,3 +83,26 @@ def test_a_single_outlier_is_still_rejected():
         fates.append(est.fix(x, 0.0, 0.5))
     assert fates == [True, True, False, True, True, False, True]
     assert est.divergences == 0 and abs(est.pose.x) < 0.3
+
+
+def test_heading_is_the_matrix_update_bit_for_bit():
+    """The scalar heading update gives exactly what the matrix form K = P H'/S, x + K y, (I - K H) P gives,
+    zero entries of the yaw column included (where a signed zero could differ)."""
+    H = np.array([[0.0, 0.0, 1.0, 0.0]])
+    rng = np.random.default_rng(7)
+    for k in range(300):
+        A = rng.normal(size=(4, 4)) * 10 ** rng.uniform(-4, 1)
+        P = A @ A.T
+        if k % 3 == 0:
+            P[0, 2] = P[2, 0] = P[3, 2] = P[2, 3] = 0.0  # a yaw uncorrelated with x and the bias, as at start
+        x = rng.normal(size=(4, 1))
+        yaw, std = rng.uniform(-4, 4), rng.uniform(0.01, 0.5)
+        est = Estimator(0.0, 0.0, 0.0, 0.0)
+        est._f.x, est._f.P = x.copy(), P.copy()
+        est.heading(yaw, std)
+        S = float(P[2, 2]) + std * std
+        innov = (yaw - float(x[2, 0]) + math.pi) % (2 * math.pi) - math.pi
+        K = P @ H.T / S
+        want = (*(x + K * innov)[:, 0].tolist(), *((np.eye(4) - K @ H) @ P).ravel().tolist())
+        got = est._values()
+        assert [struct.pack("<d", v) for v in got] == [struct.pack("<d", v) for v in want]

@@ -3,8 +3,11 @@ checked after each step. One story per rule of DESIGN §3.5 and §6 "Where the r
 
 from __future__ import annotations
 
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
 from vehicle.lease import ExpireReason, Holder, LeaseBook, LeaseConfig
-from vehicle.link_watch import GOOD_QUALITY, Delivery, LinkWatch, Trigger, WatchConfig
+from vehicle.link_watch import EPS, GOOD_QUALITY, Delivery, LinkWatch, Trigger, WatchConfig
 
 GCS = 255
 RATE = 10.0  # packets/s, a ground station streaming teleop
@@ -186,3 +189,24 @@ def test_two_lucky_packets_are_not_a_regained_link():
     assert [trig for _, trig in st.triggers] == [Trigger.LOST]
     st.run(12.0, 14.0)
     assert [trig for _, trig in st.triggers] == [Trigger.LOST, Trigger.REGAINED]
+
+
+def _ratio_by_definition(arrivals, t: float, window: float) -> float:
+    """The share of packets sent in the window that arrived, spelled out (reference for ``Delivery.ratio``)."""
+    since = t - window - EPS
+    inside = [u for ta, u in arrivals if ta > since]
+    if not inside:
+        return 0.0
+    before = [u for ta, u in arrivals if ta <= since]
+    first = max(before) if before else min(inside) - 1
+    sent = max(inside) - first
+    return min(1.0, len(inside) / sent) if sent > 0 else 1.0
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.floats(0, 10), st.integers(0, 400)), max_size=40), st.floats(0, 12), st.floats(0.1, 4))
+def test_delivery_ratio_is_its_definition(arrivals, t, window):
+    arrivals = tuple(sorted(arrivals, key=lambda a: a[1]))
+    d = Delivery(arrivals, arrivals[-1][1] if arrivals else None, arrivals[-1][0] if arrivals else None, 0)
+    want = None if not arrivals else _ratio_by_definition(arrivals, t, window)
+    assert d.ratio(t, window) == want

@@ -159,3 +159,40 @@ def test_sim_serve_answers_a_command_in_the_tick_it_arrived():
             if m.get_type() == "COMMAND_ACK"]
     assert [m.command for _, m in acks] == [mav.MAV_CMD_REQUEST_MESSAGE]
     assert acks[0][0] == link.received_at  # no sleep between the command read and its answer: the same tick
+
+
+def test_sim_serve_answers_a_command_arriving_between_ticks_at_once():
+    """With ``wait`` (the UDP socket's readiness in `sim serve`) a COMMAND_LONG arriving 5 ms into the wait for the
+    next tick is answered then, through the radio proxy, not at the next tick (injected clock: simulated time)."""
+    from sim.scenario import load
+    from sim.serve import Server
+    from vehicle.mavlink import mav
+
+    server = Server(load("open"), port=0, peers=(), perfect_link=True)
+    gcs = mav.MAVLink(None, 255, 190)
+    cmd = gcs.command_long_encode(1, 1, mav.MAV_CMD_REQUEST_MESSAGE, 0, 0, 0, 0, 0, 0, 0, 0).pack(gcs)
+    now = [50.0]
+    link = _FakeLink(now, cmd, at=50.305)  # ticks start at 50.30 and 50.32
+    server.proxy.transport = link
+    tick_clocks: list[float] = []
+
+    def wait(timeout: float) -> bool:
+        if link.received_at is None and now[0] < link.at <= now[0] + timeout:
+            now[0] = link.at
+            return True
+        now[0] += timeout
+        return False
+
+    def after_tick_clock(t: float, after=server._after_tick) -> None:
+        tick_clocks.append(now[0])
+        after(t)
+
+    server._after_tick = after_tick_clock
+    try:
+        server.serve(duration=0.6, clock=lambda: now[0], sleep=lambda s: None, out=None, wait=wait)
+    finally:
+        server.close()
+    parser = mav.MAVLink(None, 0, 0)
+    acks = [at for at, data in link.sent for m in parser.parse_buffer(data) or [] if m.get_type() == "COMMAND_ACK"]
+    assert link.received_at == 50.305 and acks == [50.305]  # answered the moment it came, between two ticks
+    assert not any(abs(c - 50.305) < 1e-9 for c in tick_clocks)

@@ -81,3 +81,20 @@ def test_strangers_cycling_ports_never_evict_a_pinned_peer():
     finally:
         for t in (owner, vehicle, *strangers):
             t.close()
+
+
+def test_ready_says_whether_a_datagram_waits_and_is_false_once_closed():
+    """The readiness the vehicle loop waits on between ticks: False with nothing to read, True once a datagram is
+    there (and it stays there for ``receive``), False on a closed socket instead of raising."""
+    vehicle = UdpTransport()
+    gcs = UdpTransport(peers=(vehicle.address,))
+    try:
+        assert vehicle.ready(0.0) is False
+        gcs.send(b"ping")
+        assert vehicle.ready(2.0) is True
+        assert [data for data, _ in vehicle.receive()] == [b"ping"]
+        assert vehicle.ready(0.0) is False
+    finally:
+        gcs.close()
+        vehicle.close()
+    assert vehicle.ready(0.0) is False

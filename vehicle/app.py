@@ -501,10 +501,17 @@ def velocity_to_command(vn: float, ve: float, yaw_rate: float | None, yaw: float
 def run(vehicle: Vehicle, endpoint, receive: Callable[[float], list], send: Callable[[bytes, float], None],
         clock: Callable[[], float] = time.monotonic, stop: Callable[[], bool] = lambda: False,
         sleep: Callable[[float], None] = time.sleep, speedup: float = 1.0,
-        after_tick: Callable[[float], None] | None = None) -> None:
+        after_tick: Callable[[float], None] | None = None,
+        wait: Callable[[float], bool] | None = None) -> None:
     """The real-time shell around one vehicle: 50 Hz ticks paced by ``clock`` (``speedup`` times faster),
     frames in through ``receive(t)`` (bytes, or (bytes, source address)) and out through ``send(frame, t)``,
     until ``stop()``.
+
+    ``wait(timeout) -> bool`` (True: input is ready before the timeout) lets the link be served between ticks, as
+    autopilots service their links faster than their control loop: a command that arrives just after a tick is
+    handled at once, at that tick's time, and its COMMAND_ACK leaves then instead of up to a tick later. Between
+    ticks only frames are handled and answered; the vehicle, the physics (``after_tick``) and telemetry move on
+    the tick. Without ``wait`` the loop sleeps until the next tick.
 
     A real robot passes a UDP or serial link and its driver; the simulator passes the radio proxy and steps the
     physics in ``after_tick``.
@@ -512,16 +519,33 @@ def run(vehicle: Vehicle, endpoint, receive: Callable[[float], list], send: Call
     t0, start = clock(), vehicle.t
     while not stop():
         t = round(vehicle.t + DT, 9)
-        for item in receive(t):
-            if isinstance(item, tuple):  # (bytes, where they came from): the endpoint learns its owner's address
-                endpoint.receive(item[0], t, item[1])
-            else:
-                endpoint.receive(item, t)
+        _take(endpoint, receive(t), t)
         vehicle.tick(t)
         if after_tick is not None:
             after_tick(t)
         for frame in endpoint.tick(t):
             send(frame, t)
-        wait = t0 + (t - start) / speedup - clock()
-        if wait > 0:
-            sleep(wait)
+        due = t0 + (t - start) / speedup
+        remaining = due - clock()
+        while remaining > 0:
+            if wait is None:
+                sleep(remaining)
+                break
+            if not wait(remaining):  # nothing came: the next tick is due (or the link failed: sleep instead)
+                remaining = due - clock()
+                if remaining > 0:
+                    sleep(remaining)
+                break
+            _take(endpoint, receive(t), t)  # input before the next tick: handled and answered now, at this tick's time
+            for frame in endpoint.replies():
+                send(frame, t)
+            remaining = due - clock()
+
+
+def _take(endpoint, items: list, t: float) -> None:
+    """Hand what ``receive`` gave to the endpoint, at time ``t``."""
+    for item in items:
+        if isinstance(item, tuple):  # (bytes, where they came from): the endpoint learns its owner's address
+            endpoint.receive(item[0], t, item[1])
+        else:
+            endpoint.receive(item, t)

@@ -53,10 +53,8 @@ def _h_pos(x: np.ndarray) -> np.ndarray:
 _H_POS = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
 
 
-_H_YAW = np.array([[0.0, 0, 1.0, 0]])
-_H_YAW_T = _H_YAW.T  # the same arrays heading() built on every call (five times a second)
-_I4 = np.eye(4)
-_I4.flags.writeable = False
+_I2 = np.eye(2)
+_I2.flags.writeable = False
 
 
 def _jac_pos(_x: np.ndarray) -> np.ndarray:
@@ -78,6 +76,10 @@ class Estimator:
         self.fixes_used = 0
         self.fixes_rejected = 0
         self._pose: Pose | None = None
+        # x (4) then P (16, row by row) as floats while only predictions and headings ran since the last position
+        # fix (None: the filter's arrays hold the state): at 50 Hz between fixes, building arrays every tick cost
+        # more than the arithmetic
+        self._state: tuple[float, ...] | None = None
         self.inertial_speed = 0.0
         self.accel_bias = 0.0  # m/s^2, learnt while odometry and accelerometer agree
         self.residual = 0.0  # odometry minus inertial speed, smoothed
@@ -134,44 +136,51 @@ class Estimator:
             if trusted != speed:
                 qv_extra = (speed - trusted) ** 2 * dt  # as uncertain as the wheels and the IMU disagree
                 speed = trusted
-        f = self._f
-        x, y, yaw, b = f.x[0, 0], f.x[1, 0], f.x[2, 0], f.x[3, 0]
+        (x, y, yaw, b, p00, p01, p02, p03, p10, p11, p12, p13, p20, p21, p22, p23, p30, p31, p32, p33) = self._values()
         cs, sn = math.cos(yaw), math.sin(yaw)
-        f.x = np.array(((x + speed * cs * dt,), (y + speed * sn * dt,), (yaw + (yaw_rate - b) * dt,), (b,)))
         a02, a12, a23 = -speed * sn * dt, speed * cs * dt, -dt
-        (p00, p01, p02, p03), (p10, p11, p12, p13), (p20, p21, p22, p23), (p30, p31, p32, p33) = f.P.tolist()
         # rows: F P
-        r0 = (p00 + a02 * p20, p01 + a02 * p21, p02 + a02 * p22, p03 + a02 * p23)
-        r1 = (p10 + a12 * p20, p11 + a12 * p21, p12 + a12 * p22, p13 + a12 * p23)
-        r2 = (p20 + a23 * p30, p21 + a23 * p31, p22 + a23 * p32, p23 + a23 * p33)
-        r3 = (p30, p31, p32, p33)
+        r00, r01, r02, r03 = p00 + a02 * p20, p01 + a02 * p21, p02 + a02 * p22, p03 + a02 * p23
+        r10, r11, r12, r13 = p10 + a12 * p20, p11 + a12 * p21, p12 + a12 * p22, p13 + a12 * p23
+        r20, r21, r22, r23 = p20 + a23 * p30, p21 + a23 * p31, p22 + a23 * p32, p23 + a23 * p33
         qv, qw, qb = (c.speed_noise**2) * dt + qv_extra, (c.gyro_noise**2) * dt, (c.bias_walk**2) * dt
-        q = (qv * cs * cs, qv * cs * sn, qv * sn * sn)
+        q0, q1, q2 = qv * cs * cs, qv * cs * sn, qv * sn * sn
         # columns: (F P) F' + Q
-        rows = []
-        for i, r in enumerate((r0, r1, r2, r3)):
-            row = [r[0] + a02 * r[2], r[1] + a12 * r[2], r[2] + a23 * r[3], r[3]]
-            if i == 0:
-                row[0] += q[0]
-                row[1] += q[1]
-            elif i == 1:
-                row[0] += q[1]
-                row[1] += q[2]
-            elif i == 2:
-                row[2] += qw
-            else:
-                row[3] += qb
-            rows.append(row)
-        f.P = np.array(rows)
-        f.x_prior, f.P_prior = f.x, f.P
+        self._state = (
+            x + speed * cs * dt, y + speed * sn * dt, yaw + (yaw_rate - b) * dt, b,
+            r00 + a02 * r02 + q0, r01 + a12 * r02 + q1, r02 + a23 * r03, r03,
+            r10 + a02 * r12 + q1, r11 + a12 * r12 + q2, r12 + a23 * r13, r13,
+            r20 + a02 * r22, r21 + a12 * r22, r22 + a23 * r23 + qw, r23,
+            p30 + a02 * p32, p31 + a12 * p32, p32 + a23 * p33, p33 + qb,
+        )
         self.t = t
         self._pose = None
 
+    def _values(self) -> tuple[float, ...]:
+        """x then P as floats: kept from the last prediction, or read from the filter after one of its updates."""
+        state = self._state
+        if state is None:
+            f = self._f
+            state = self._state = (*f.x[:, 0].tolist(), *f.P.ravel().tolist())
+        return state
+
+    def _filter(self) -> ExtendedKalmanFilter:
+        """The filter with the state kept in floats written back into its arrays, before filterpy's update reads
+        them; afterwards the update's arrays are the state again."""
+        f = self._f
+        state = self._state
+        if state is not None:
+            f.x = np.array(state[:4]).reshape(4, 1)
+            f.P = np.array(state[4:]).reshape(4, 4)
+            f.x_prior, f.P_prior = f.x, f.P
+            self._state = None
+        return f
+
     def fix(self, x: float, y: float, std: float) -> bool:
         """Fuse a position fix; returns False if it was gated out as an outlier."""
-        f = self._f
+        f = self._filter()
         z = np.array([[x], [y]])
-        S = f.P[:2, :2] + np.eye(2) * std * std
+        S = f.P[:2, :2] + _I2 * std * std
         r = z - f.x[:2]
         m2 = float((r.T @ np.linalg.solve(S, r))[0, 0])
         if m2 > self.config.fix_gate**2:
@@ -184,32 +193,39 @@ class Estimator:
             self.divergences += 1
             f.P[:2, :2] = f.P[:2, :2] + r @ r.T
         self.outlier_streak = 0
-        f.update(z, _jac_pos, _h_pos, R=np.eye(2) * std * std)
+        f.update(z, _jac_pos, _h_pos, R=_I2 * std * std)
         self._pose = None
         self.fixes_used += 1
         return True
 
     def heading(self, yaw: float, std: float) -> None:
-        """Fuse an absolute heading; the innovation is wrapped so that +-pi is one angle."""
-        f = self._f
-        H = _H_YAW
-        S = float(f.P[2, 2]) + std * std
-        innov = (yaw - float(f.x[2, 0]) + math.pi) % (2 * math.pi) - math.pi
-        K = f.P @ _H_YAW_T / S
-        f.x = f.x + K * innov
-        f.P = (_I4 - K @ H) @ f.P
+        """Fuse an absolute heading; the innovation is wrapped so that +-pi is one angle.
+
+        H picks the yaw, so the gain K is P's yaw column over S, the state update is four scalar products, and
+        I - K H is the identity with its yaw column replaced (every other entry is exactly 0 or 1). The covariance
+        update stays the matrix product (I - K H) P, which is what fixes its rounding."""
+        s = self._values()
+        S = s[14] + std * std  # P[2, 2]
+        innov = (yaw - s[2] + math.pi) % (2 * math.pi) - math.pi
+        k0, k1, k2, k3 = s[6] / S, s[10] / S, s[14] / S, s[18] / S  # P H' / S
+        # (0.0 - k, not -k: the same signed zero as the matrix subtraction when k is zero)
+        i_kh = np.array(((1.0, 0.0, 0.0 - k0, 0.0), (0.0, 1.0, 0.0 - k1, 0.0), (0.0, 0.0, 1.0 - k2, 0.0),
+                         (0.0, 0.0, 0.0 - k3, 1.0)))
+        P = i_kh @ np.array(s[4:]).reshape(4, 4)
+        self._state = (s[0] + k0 * innov, s[1] + k1 * innov, s[2] + k2 * innov, s[3] + k3 * innov,
+                       *P.ravel().tolist())
         self._pose = None
 
     @property
     def pose(self) -> Pose:
         if self._pose is None:
-            x = self._f.x[:, 0]
-            P = self._f.P
-            std = math.sqrt(max(0.0, 0.5 * (P[0, 0] + P[1, 1])))
-            yaw = (x[2] + math.pi) % (2 * math.pi) - math.pi
-            self._pose = Pose(float(x[0]), float(x[1]), float(yaw), std, self.t)
+            s = self._values()
+            x0, x1, x2, p00, p11 = s[0], s[1], s[2], s[4], s[9]
+            std = math.sqrt(max(0.0, 0.5 * (p00 + p11)))
+            yaw = (x2 + math.pi) % (2 * math.pi) - math.pi
+            self._pose = Pose(x0, x1, yaw, std, self.t)
         return self._pose
 
     @property
     def covariance(self) -> np.ndarray:
-        return self._f.P.copy()
+        return self._filter().P.copy()

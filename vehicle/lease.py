@@ -16,6 +16,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from vehicle.frozen import evolve
 from vehicle.link_watch import EPS, Delivery, LinkWatch, Trigger, WatchConfig
 
 NO_INDEX = 0xFFFF  # wire value for "no lease" in LEASE_EVENT / LEASE_STATUS
@@ -379,7 +380,7 @@ class LeaseBook:
         measures its delivery, and ``tick`` evaluates the triggers."""
         if sysid != self.owner:
             return self
-        return replace(self, link=self.link.heard(t, seq))
+        return evolve(self, link=self.link.heard(t, seq))  # (every owner frame: the cheap copy)
 
     def tick(self, t: float) -> Outcome:
         """Consume the link watch's trigger: COMMS_LOST of an operator lease, LINK_REGAINED of a service block
@@ -388,7 +389,7 @@ class LeaseBook:
             return Outcome(self)
         link, trigger = self.link.step(t)
         if trigger is Trigger.NONE:
-            return Outcome(self) if link is self.link else Outcome(replace(self, link=link))
+            return Outcome(self) if link is self.link else Outcome(evolve(self, link=link))
         book = replace(self, link=link)
         cur = self.leases[0]
         if trigger is Trigger.LOST:

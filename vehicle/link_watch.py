@@ -28,6 +28,8 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass, field, replace
 
+from vehicle.frozen import evolve
+
 EPS = 1e-6  # s: deadline tolerance (far below the 20 ms tick, far above float error)
 GOOD_QUALITY = 0.8  # delivery at or above this is a good link (crumb tags, continuous contact)
 SEQ_SPACE = 256  # MAVLink's uint8 sequence number
@@ -78,16 +80,16 @@ class Delivery:
             return Delivery(((t, seq),), seq, t, 0)
         d = (seq - self.newest) % SEQ_SPACE
         if d == 0:
-            return replace(self, last_t=t, repeats=self.repeats + 1)
+            return evolve(self, last_t=t, repeats=self.repeats + 1)
         if d < SEQ_SPACE // 2:
             u = self.newest + d
             return Delivery(_trim((*self.arrivals, (t, u)), t - horizon), u, t, 0)
         u = self.newest - (SEQ_SPACE - d)  # behind the newest: a late packet or a duplicate of one
         first_t, first_u = self.arrivals[0]
         if any(a == u for _, a in self.arrivals) or (u < first_u and first_t <= t - horizon):
-            return replace(self, last_t=t)  # a duplicate, or older than the window remembers
+            return evolve(self, last_t=t)  # a duplicate, or older than the window remembers
         arrivals = tuple(sorted((*self.arrivals, (t, u)), key=lambda a: a[1]))
-        return replace(self, arrivals=_trim(arrivals, t - horizon), last_t=t)
+        return evolve(self, arrivals=_trim(arrivals, t - horizon), last_t=t)
 
     def interval(self) -> float | None:
         """The sender's mean time between packets over the window (None until it can be told)."""
@@ -111,13 +113,23 @@ class Delivery:
         if self.repeats >= STUCK_REPEATS:
             return None
         since = t - window - EPS
-        inside = [u for ta, u in self.arrivals if ta > since]
+        # one pass (twice a packet): how many arrived inside the window, their lowest and highest sequence number,
+        # and the highest one before it (the reference for what was sent since)
+        inside, lo, hi, before = 0, 0, 0, None
+        for ta, u in self.arrivals:
+            if ta > since:
+                if not inside or u < lo:
+                    lo = u
+                if not inside or u > hi:
+                    hi = u
+                inside += 1
+            elif before is None or u > before:
+                before = u
         if not inside:
             return 0.0
-        before = [u for ta, u in self.arrivals if ta <= since]
-        first = max(before) if before else min(inside) - 1
-        sent = max(inside) - first
-        return min(1.0, len(inside) / sent) if sent > 0 else 1.0
+        first = before if before is not None else lo - 1
+        sent = hi - first
+        return min(1.0, inside / sent) if sent > 0 else 1.0
 
 
 def _trim(arrivals: tuple[tuple[float, int], ...], since: float) -> tuple[tuple[float, int], ...]:
@@ -155,11 +167,11 @@ class LinkWatch:
             delivery = delivery.heard(seq, t, max(cfg.window, cfg.timeout), cfg.timeout)
             q, low = delivery.ratio(t, cfg.window), _low(delivery, t, cfg)
         if not (seq is None or _good(q)):
-            return replace(self, last_heard=t, contact_since=None, contact_packets=0, delivery=delivery,
+            return evolve(self, last_heard=t, contact_since=None, contact_packets=0, delivery=delivery,
                            quality_heard=q, low=low)
         unbroken = (self.contact_since is not None and self.last_heard is not None
                     and t - self.last_heard <= cfg.contact_gap + EPS)
-        return replace(self, last_heard=t, contact_since=self.contact_since if unbroken else t, last_good=t,
+        return evolve(self, last_heard=t, contact_since=self.contact_since if unbroken else t, last_good=t,
                        contact_packets=self.contact_packets + 1 if unbroken else 1,
                        delivery=delivery, quality_heard=q, low=low)
 

@@ -17,6 +17,7 @@ from enum import Enum
 from pathlib import Path
 
 from link import dialect
+from link.codec import read_frames
 from link.command_params import check_command, command_name, command_values
 from link.mission import Item, Origin, item_from_message
 from link.plan_items import (
@@ -196,7 +197,7 @@ class Endpoint:
         """Parse and handle whatever frames ``data`` holds; garbage is counted and dropped. ``source`` (a UDP
         address, opaque here) is remembered per sender, so the transport can keep the owner's (``pinned``)."""
         try:
-            msgs = self.parser.parse_buffer(data) or []
+            msgs = read_frames(self.parser, data)
         except Exception:  # noqa: BLE001 - a hostile byte stream must never take the vehicle down
             self.counters.bad_frames += 1
             self.parser = mav.MAVLink(None, 0, 0)
@@ -625,8 +626,14 @@ class Endpoint:
     def custom_mode(self) -> int:
         return self.telemetry.custom_mode()
 
-    def tick(self, t: float) -> list[bytes]:
-        """Announce lease events, send due telemetry, and return every frame produced since the last tick."""
+    def replies(self) -> list[bytes]:
+        """The frames produced since the last call or tick (answers to what was received), without running the
+        tick: what a loop serving its link between ticks sends at once."""
+        frames = self._sink.frames
+        self._sink.frames = []
+        return frames
+
+    def _announce(self) -> None:
         v = self.vehicle
         for ev in v.events:
             self.mav.lease_event_send(self.telemetry.boot_ms(ev.t), ev.epoch, wire_index(ev.expired),
@@ -640,6 +647,12 @@ class Endpoint:
             if seq >= 0:
                 self.mav.mission_item_reached_send(seq)
         v.reached.clear()
+
+    def tick(self, t: float) -> list[bytes]:
+        """Announce lease events, send due telemetry, and return every frame produced since the last tick."""
+        v = self.vehicle
+        if v.events or v.notices or v.reached:  # (rarely: most ticks have nothing to announce)
+            self._announce()
         why = self.missions.tick(t)
         if why:
             self.statustext(why, mav.MAV_SEVERITY_WARNING)

@@ -67,6 +67,7 @@ class Telemetry:
         self.last_status_key: tuple | None = None
         self.last_control_key: tuple | None = None
         self.last_mode: int | None = None
+        self._seen: tuple = (None, None, None)  # (book, service, holding) the keys were last computed from
 
     def boot_ms(self, t: float) -> int:
         return int(max(0.0, t - self.boot_t) * 1000) & 0xFFFFFFFF
@@ -92,6 +93,27 @@ class Telemetry:
         if t >= self.next_heartbeat:
             self.next_heartbeat = t + 1.0
             self._heartbeat(t)
+        seen = (v.book, v.service, v.holding)
+        if seen[0] is not self._seen[0] or seen[1] is not self._seen[1] or seen[2] != self._seen[2]:
+            # the keys below are functions of these three immutable values alone: most ticks they are the very
+            # same objects, and nothing can have changed
+            self._seen = seen
+            self._on_change(t)
+        if t + 1e-9 < self.next_due:
+            return
+        for msgid, interval in self.intervals.items():
+            due = self.due.get(msgid, self.boot_t)
+            if t + 1e-9 >= due:
+                # keep the average rate exact although ticks are coarser than the interval
+                nxt = due + interval
+                self.due[msgid] = nxt if nxt > t else t + interval
+                self.emit(msgid, t)
+        self.next_due = min(self.due.get(m, self.boot_t) for m in self.intervals)
+
+    def _on_change(self, t: float) -> None:
+        """LEASE_STATUS, MISSION_CURRENT and CONTROL_STATUS due now, and CURRENT_MODE sent, if what they show
+        changed."""
+        v = self.vehicle
         status_key = self._status_key()
         if status_key != self.last_status_key:
             self.last_status_key = status_key
@@ -107,16 +129,6 @@ class Telemetry:
             self.last_control_key = control_key
             self.due[mav.MAVLINK_MSG_ID_CONTROL_STATUS] = t
             self.next_due = t
-        if t + 1e-9 < self.next_due:
-            return
-        for msgid, interval in self.intervals.items():
-            due = self.due.get(msgid, self.boot_t)
-            if t + 1e-9 >= due:
-                # keep the average rate exact although ticks are coarser than the interval
-                nxt = due + interval
-                self.due[msgid] = nxt if nxt > t else t + interval
-                self.emit(msgid, t)
-        self.next_due = min(self.due.get(m, self.boot_t) for m in self.intervals)
 
     def _status_key(self) -> tuple:
         b = self.vehicle.book

@@ -1,0 +1,74 @@
+"""Reading MAVLink frames out of datagrams, with pymavlink's own parser, at the cost of one frame per datagram.
+
+Both ends (``vehicle.mavlink.Endpoint`` and ``gcs.station.GroundStation``) receive UDP datagrams or radio packets,
+and almost every one holds exactly one complete MAVLink 2 frame. pymavlink's ``parse_buffer`` does not know that:
+it runs its byte-stream state machine over the datagram, then calls it again to learn that nothing is left, and at
+50 Hz both ends pay that for every frame. ``read_frames`` gives the same answer cheaper:
+
+* a datagram that is exactly one well-formed MAVLink 2 frame, with nothing left over in the parser from earlier
+  bytes, goes straight to the parser's own ``decode`` (checksum, CRC extra, signature block, sequence number: the
+  very code ``parse_buffer`` ends in), with the parser's counters kept as ``parse_char`` keeps them;
+* anything else (several frames, a fragment, garbage, MAVLink 1, unknown flags, a parser holding a partial frame,
+  a parser without ``robust_parsing``) takes pymavlink's ``parse_char`` path, which ``parse_buffer`` is, so a
+  hostile stream is handled exactly as before: BAD_DATA for garbage and bad checksums, resynchronisation, and the
+  same exceptions for the caller to catch.
+
+It returns a list (empty when nothing completed), never None.
+"""
+
+from __future__ import annotations
+
+import sys
+
+MARKER_V2 = 0xFD
+HEADER_V2 = 10  # bytes before the payload
+CHECKSUM = 2
+SIGNATURE = 13
+IFLAG_SIGNED = 0x01
+
+
+def _one_frame(data) -> bool:
+    """Whether ``data`` is exactly one MAVLink 2 frame by its length fields (its content is decode's to judge)."""
+    n = len(data)
+    if n < HEADER_V2 + CHECKSUM or data[0] != MARKER_V2:
+        return False
+    flags = data[2]
+    if flags & ~IFLAG_SIGNED:
+        return False  # unknown incompatibility flags: the slow path reports them as BAD_DATA
+    return n == HEADER_V2 + data[1] + CHECKSUM + (SIGNATURE if flags & IFLAG_SIGNED else 0)
+
+
+def read_frames(parser, data) -> list:
+    """The messages in ``data`` (BAD_DATA included, as pymavlink's robust parser gives them), in order."""
+    if not parser.robust_parsing:
+        return parser.parse_buffer(data) or []  # (its prefix-error latch is pymavlink's business)
+    if parser.callback is None and parser.buf_len() == 0 and _one_frame(data):
+        return [_decode_one(parser, data)]
+    m = parser.parse_char(data)
+    if m is None:
+        return []
+    out = [m]
+    while parser.buf_len() > 0:  # more bytes after the first frame (on an empty buffer parse_char finds nothing)
+        m = parser.parse_char(b"")
+        if m is None:
+            break
+        out.append(m)
+    return out
+
+
+def _decode_one(parser, data):
+    """``parse_char(data)`` for a datagram that is one frame and an empty parser, without the state machine: the
+    same decode, the same message or BAD_DATA, the same counters."""
+    frame = bytearray(data)
+    parser.total_bytes_received += len(frame)
+    parser.have_prefix_error = False
+    parser.expected_length = HEADER_V2 + CHECKSUM
+    mod = sys.modules[type(parser).__module__]  # the generated dialect module: its MAVError and BAD_DATA
+    try:
+        m = parser.decode(frame)
+    except mod.MAVError as reason:
+        m = mod.MAVLink_bad_data(frame, reason.message)
+        parser.total_receive_errors += 1
+    parser.total_packets_received += 1
+    return m
+
