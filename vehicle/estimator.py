@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
@@ -37,8 +38,10 @@ class EstimatorConfig:
     accel_bias_tau: float = 20.0  # s^2: how slowly the accelerometer bias is learnt
 
 
-@dataclass(frozen=True)
-class Pose:
+class Pose(NamedTuple):
+    """One estimator output. A named tuple rather than a frozen dataclass: a new one is made every 20 ms tick,
+    and a tuple is built at a third of the cost, with the same names and the same immutability."""
+
     x: float
     y: float
     yaw: float

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -38,8 +39,10 @@ class TrailConfig:
     max_points: int = 2000  # TRL_MAX_PTS
 
 
-@dataclass(frozen=True)
-class Crumb:
+class Crumb(NamedTuple):
+    """One estimator output as the trail sees it. A named tuple rather than a frozen dataclass: the vehicle lays
+    one every 20 ms tick, and a tuple is built at a third of the cost, with the same names and immutability."""
+
     x: float
     y: float
     t: float
