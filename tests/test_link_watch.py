@@ -210,3 +210,26 @@ def test_delivery_ratio_is_its_definition(arrivals, t, window):
     d = Delivery(arrivals, arrivals[-1][1] if arrivals else None, arrivals[-1][0] if arrivals else None, 0)
     want = None if not arrivals else _ratio_by_definition(arrivals, t, window)
     assert d.ratio(t, window) == want
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.floats(0, 10), st.integers(0, 400)), max_size=40), st.floats(0, 12),
+       st.floats(0.1, 4), st.floats(0.1, 4))
+def test_two_windows_in_one_pass_are_each_its_ratio(arrivals, t, short, long):
+    arrivals = tuple(sorted(arrivals, key=lambda a: a[1]))
+    d = Delivery(arrivals, arrivals[-1][1] if arrivals else None, arrivals[-1][0] if arrivals else None, 0)
+    want = (None, None) if not arrivals else (_ratio_by_definition(arrivals, t, short),
+                                              _ratio_by_definition(arrivals, t, long))
+    assert d.ratios(t, short, long) == want
+
+
+@settings(max_examples=500, deadline=None)
+@given(st.lists(st.tuples(st.floats(0, 10), st.integers(0, 400)), max_size=40, unique_by=lambda a: a[1]),
+       st.floats(0, 60))
+def test_the_cheap_bound_never_hides_a_wrapped_sequence(arrivals, silence):
+    """A window restarts after a silence of half a sequence space at the sender's rate; the quick look at the
+    first and last arrival must give the same answer as the full interval, whatever the arrival order in time."""
+    arrivals = tuple(sorted(arrivals, key=lambda a: a[1]))
+    d = Delivery(arrivals, arrivals[-1][1] if arrivals else None, arrivals[-1][0] if arrivals else None, 0)
+    interval = d.interval()
+    assert d._may_have_wrapped(silence) == (interval is not None and silence >= 128 * interval)

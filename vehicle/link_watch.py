@@ -75,8 +75,7 @@ class Delivery:
         if self.newest is None or self.last_t is None:
             return Delivery(((t, seq),), seq, t, 0)
         silence = t - self.last_t
-        interval = self.interval()
-        if silence >= outage - EPS or (interval is not None and silence >= (SEQ_SPACE // 2) * interval):
+        if silence >= outage - EPS or self._may_have_wrapped(silence):
             return Delivery(((t, seq),), seq, t, 0)
         d = (seq - self.newest) % SEQ_SPACE
         if d == 0:
@@ -90,6 +89,23 @@ class Delivery:
             return evolve(self, last_t=t)  # a duplicate, or older than the window remembers
         arrivals = tuple(sorted((*self.arrivals, (t, u)), key=lambda a: a[1]))
         return evolve(self, arrivals=_trim(arrivals, t - horizon), last_t=t)
+
+    def _may_have_wrapped(self, silence: float) -> bool:
+        """Whether the sender, at its rate over the window (``interval``), may have sent half a sequence space
+        during ``silence``.
+
+        ``interval`` takes the span of all arrival times, a pass over the window; the span between the first and
+        the last arrival never exceeds it, so when even that span says the silence is too short the pass is
+        skipped. It nearly always is: on a live link the silence is one packet period, and this runs every packet.
+        """
+        a = self.arrivals
+        if len(a) < 2:
+            return False
+        span_u = a[-1][1] - a[0][1]
+        if span_u <= 0 or silence < (SEQ_SPACE // 2) * (abs(a[-1][0] - a[0][0]) / span_u):
+            return False
+        interval = self.interval()
+        return interval is not None and silence >= (SEQ_SPACE // 2) * interval
 
     def interval(self) -> float | None:
         """The sender's mean time between packets over the window (None until it can be told)."""
@@ -108,28 +124,47 @@ class Delivery:
     def ratio(self, t: float, window: float) -> float | None:
         """Share of the packets sent in the last ``window`` seconds that arrived; None when it cannot be told
         (nothing heard yet, or a sender that never advances its sequence number)."""
-        if self.newest is None:
-            return None
-        if self.repeats >= STUCK_REPEATS:
-            return None
-        since = t - window - EPS
-        # one pass (twice a packet): how many arrived inside the window, their lowest and highest sequence number,
-        # and the highest one before it (the reference for what was sent since)
-        inside, lo, hi, before = 0, 0, 0, None
+        return self.ratios(t, window, window)[0]
+
+    def ratios(self, t: float, short: float, long: float) -> tuple[float | None, float | None]:
+        """``ratio`` over two windows in one pass: every packet from the owner measures both (the delivery behind
+        "good" and the one LNK_MIN_Q judges), and two passes over the window were the link watch's largest cost.
+
+        The arrivals are in sequence order, so inside a window the first one has the lowest sequence number and
+        the last one the highest, and the last one before it the highest before it (the reference for what was
+        sent since)."""
+        if self.newest is None or self.repeats >= STUCK_REPEATS:
+            return None, None
+        short_since, long_since = t - short - EPS, t - long - EPS
+        short_in = short_lo = short_hi = long_in = long_lo = long_hi = 0
+        short_before: int | None = None
+        long_before: int | None = None
         for ta, u in self.arrivals:
-            if ta > since:
-                if not inside or u < lo:
-                    lo = u
-                if not inside or u > hi:
-                    hi = u
-                inside += 1
-            elif before is None or u > before:
-                before = u
-        if not inside:
-            return 0.0
-        first = before if before is not None else lo - 1
-        sent = hi - first
-        return min(1.0, inside / sent) if sent > 0 else 1.0
+            if ta > short_since:
+                if not short_in:
+                    short_lo = u
+                short_hi = u
+                short_in += 1
+            else:
+                short_before = u
+            if ta > long_since:
+                if not long_in:
+                    long_lo = u
+                long_hi = u
+                long_in += 1
+            else:
+                long_before = u
+        return (_share(short_in, short_lo, short_hi, short_before),
+                _share(long_in, long_lo, long_hi, long_before))
+
+
+def _share(inside: int, lo: int, hi: int, before: int | None) -> float:
+    """Arrived over sent in a window: ``inside`` arrivals with sequence numbers ``lo``..``hi``, after ``before``."""
+    if not inside:
+        return 0.0
+    first = before if before is not None else lo - 1
+    sent = hi - first
+    return min(1.0, inside / sent) if sent > 0 else 1.0
 
 
 def _trim(arrivals: tuple[tuple[float, int], ...], since: float) -> tuple[tuple[float, int], ...]:
@@ -165,7 +200,8 @@ class LinkWatch:
         delivery, q, low = self.delivery, self.quality_heard, self.low
         if seq is not None:
             delivery = delivery.heard(seq, t, max(cfg.window, cfg.timeout), cfg.timeout)
-            q, low = delivery.ratio(t, cfg.window), _low(delivery, t, cfg)
+            q, q_timeout = delivery.ratios(t, cfg.window, cfg.timeout)
+            low = _low(delivery, t, cfg, q_timeout)
         if not (seq is None or _good(q)):
             return evolve(self, last_heard=t, contact_since=None, contact_packets=0, delivery=delivery,
                            quality_heard=q, low=low)
@@ -177,10 +213,11 @@ class LinkWatch:
 
     def step(self, t: float) -> tuple[LinkWatch, Trigger]:
         """Evaluate the deadlines at ``t``: LOST, REGAINED or nothing."""
-        cfg = self.config
-        age = self.age(t)
-        if age is None:
+        last = self.last_heard
+        if last is None:
             return self, Trigger.NONE
+        cfg = self.config
+        age = t - last  # (``age``, written out: this runs every tick)
         if not self.lost:
             if age >= cfg.timeout - EPS or self.low:
                 # contact from before the loss never counts toward the regain
@@ -193,7 +230,8 @@ class LinkWatch:
         return self, Trigger.NONE
 
     def with_config(self, config: WatchConfig) -> LinkWatch:
-        low = self.low if self.last_heard is None else _low(self.delivery, self.last_heard, config)
+        t = self.last_heard
+        low = self.low if t is None else _low(self.delivery, t, config, self.delivery.ratio(t, config.timeout))
         return replace(self, config=config, low=low)
 
     # ----- queries -----------------------------------------------------------------------------------------
@@ -206,22 +244,23 @@ class LinkWatch:
 
     def good(self, t: float) -> bool:
         """The link tag of a crumb laid now: the owner heard within LNK_GOOD_S, with a good measured delivery
-        (or no sequence numbers to measure it by)."""
-        age = self.age(t)
-        if age is None or age > self.config.contact_gap + EPS:
+        (or no sequence numbers to measure it by). (Asked every tick: ``age`` and ``_good`` written out.)"""
+        last = self.last_heard
+        if last is None or t - last > self.config.contact_gap + EPS:
             return False
         if self.delivery.newest is None:
             return True
-        return _good(self.quality_heard)
+        q = self.quality_heard
+        return q is not None and q >= GOOD_QUALITY - EPS
 
 
-def _low(delivery: Delivery, t: float, cfg: WatchConfig) -> bool:
-    """LNK_MIN_Q: the owner's delivery over the last LNK_TIMEOUT (a full window of it) is below the minimum.
-    Lucky packets reset the silence timer; they do not lift the delivery over a whole timeout."""
+def _low(delivery: Delivery, t: float, cfg: WatchConfig, q_timeout: float | None) -> bool:
+    """LNK_MIN_Q: the owner's delivery over the last LNK_TIMEOUT (a full window of it, ``q_timeout`` =
+    ``delivery.ratio(t, cfg.timeout)``) is below the minimum. Lucky packets reset the silence timer; they do not
+    lift the delivery over a whole timeout."""
     if cfg.min_quality <= 0 or not delivery.covers(t, cfg.timeout):
         return False
-    q = delivery.ratio(t, cfg.timeout)
-    return q is not None and q < cfg.min_quality - EPS
+    return q_timeout is not None and q_timeout < cfg.min_quality - EPS
 
 
 def _good(q: float | None) -> bool:
