@@ -14,7 +14,7 @@ from __future__ import annotations
 import enum
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 from vehicle.frozen import evolve
 from vehicle.link_watch import EPS, Delivery, LinkWatch, Trigger, WatchConfig
@@ -179,9 +179,11 @@ class LeaseConfig:
                            min_quality=self.min_quality)
 
 
-@dataclass(frozen=True)
-class Outcome:
-    """The result of a transition: the new book, its events and any queued commands released or dropped."""
+class Outcome(NamedTuple):
+    """The result of a transition: the new book, its events and any queued commands released or dropped.
+
+    A named tuple rather than a frozen dataclass: the lease tick answers one every 20 ms (nearly always "the
+    same book, nothing happened"), and a tuple is built at a third of the cost, with the same names."""
 
     book: LeaseBook
     events: tuple[LeaseEvent, ...] = ()
@@ -519,7 +521,7 @@ class LeaseBook:
         book = replace(self, leases=(self.leases[0], *rest),
                        queue=tuple(q for q in self.queue if q.lease.path[0] not in gone))
         out = book._expire_current(t, reason)
-        return replace(out, dropped=dropped + out.dropped)
+        return out._replace(dropped=dropped + out.dropped)
 
     def _arm(self, t: float, force: bool = False, plan: tuple[ServiceBlock, ...] | None = None) -> LeaseBook:
         """Re-arm (DESIGN §3.7): behind a current operator lease, with the link up, schedule the return plan

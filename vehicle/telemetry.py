@@ -93,11 +93,11 @@ class Telemetry:
         if t >= self.next_heartbeat:
             self.next_heartbeat = t + 1.0
             self._heartbeat(t)
-        seen = (v.book, v.service, v.holding)
-        if seen[0] is not self._seen[0] or seen[1] is not self._seen[1] or seen[2] != self._seen[2]:
+        seen = self._seen
+        if v.book is not seen[0] or v.service is not seen[1] or v.holding != seen[2]:
             # the keys below are functions of these three immutable values alone: most ticks they are the very
-            # same objects, and nothing can have changed
-            self._seen = seen
+            # same objects, and nothing can have changed (so the tuple is only built when one did)
+            self._seen = (v.book, v.service, v.holding)
             self._on_change(t)
         if t + 1e-9 < self.next_due:
             return
@@ -178,20 +178,20 @@ class Telemetry:
     def _position(self, t: float) -> None:
         p = self.vehicle.estimator.pose
         lat, lon = self.origin.to_global(p.x, p.y)
-        vx, vy = self._velocity()
+        vx, vy = self._velocity(p.yaw)
         hdg = int(math.degrees(p.yaw) % 360 * 100)
         self.mav.global_position_int_send(self.boot_ms(t), int(lat * 1e7), int(lon * 1e7),
                                           int(self.origin.alt * 1000), 0, int(vx * 100), int(vy * 100), 0, hdg)
 
-    def _velocity(self) -> tuple[float, float]:
+    def _velocity(self, yaw: float) -> tuple[float, float]:
+        """Over the ground at heading ``yaw`` (the pose's, which the caller already holds)."""
         v = self.vehicle
         speed = v.readings.speed if v.readings else 0.0
-        yaw = v.estimator.pose.yaw
         return speed * math.cos(yaw), speed * math.sin(yaw)
 
     def _local_position(self, t: float) -> None:
         p = self.vehicle.estimator.pose
-        vx, vy = self._velocity()
+        vx, vy = self._velocity(p.yaw)
         self.mav.local_position_ned_send(self.boot_ms(t), p.x, p.y, 0.0, vx, vy, 0.0)
 
     def _attitude(self, t: float) -> None:
