@@ -328,9 +328,12 @@ class Vehicle:
 
     # ----- queries -----------------------------------------------------------------------------------------
     def state(self) -> int:
-        cur = self.book.current
-        if cur is None:
+        """RETURNLINK_STATE now. (Asked every tick by telemetry and the record: the current lease is read from
+        the book's leases directly, as ``LeaseBook.current`` does.)"""
+        leases = self.book.leases
+        if not leases:
             return State.NO_OWNER
+        cur = leases[0]
         if cur.holder is Holder.OPERATOR:
             return State.TELEOP if cur.claimed else State.AWAITING_CLAIM
         st = self.service
@@ -399,7 +402,7 @@ class Vehicle:
         good crumbs, and a later return must not take them for lost ones and drive away from the operator).
         """
         crumbs = self._crumbs
-        horizon = t if flush else t - self.params["LNK_GOOD_S"]
+        horizon = t if flush else t - self.params.values["LNK_GOOD_S"]  # (the dict itself: every tick)
         last = self.book.link.last_good
         add = self.trail.add
         while crumbs and crumbs[0].t <= horizon:
@@ -409,7 +412,7 @@ class Vehicle:
 
     def _control(self, t: float, x: float, y: float, yaw: float) -> tuple[float, float]:
         book = self.book
-        cur = book.current
+        cur = book.leases[0] if book.leases else None  # book.current, read directly: this runs every tick
         if cur is None or cur.holder is Holder.OPERATOR:
             self.service, self.service_index = None, None
             return self._teleop(t)
