@@ -101,14 +101,20 @@ class Telemetry:
             self._on_change(t)
         if t + 1e-9 < self.next_due:
             return
+        # one pass: what is due is sent, and the earliest next due time is found on the way (the builders send
+        # frames, they never reschedule a stream)
+        next_due = math.inf
+        dues = self.due
         for msgid, interval in self.intervals.items():
-            due = self.due.get(msgid, self.boot_t)
+            due = dues.get(msgid, self.boot_t)
             if t + 1e-9 >= due:
                 # keep the average rate exact although ticks are coarser than the interval
                 nxt = due + interval
-                self.due[msgid] = nxt if nxt > t else t + interval
+                due = dues[msgid] = nxt if nxt > t else t + interval
                 self.emit(msgid, t)
-        self.next_due = min(self.due.get(m, self.boot_t) for m in self.intervals)
+            if due < next_due:
+                next_due = due
+        self.next_due = next_due
 
     def _on_change(self, t: float) -> None:
         """LEASE_STATUS, MISSION_CURRENT and CONTROL_STATUS due now, and CURRENT_MODE sent, if what they show
