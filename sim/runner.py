@@ -75,8 +75,6 @@ class Trace:
     operator's channel state: all immutable), a single append instead of ten and no per-tick conversions; the
     named columns (``t``, ``true``, ``est``, ...) are built from the rows when first read after new ticks."""
 
-    COLUMNS = ("t", "true", "est", "holder", "index", "state", "link", "rssi", "heard", "cmd")
-
     def __init__(self) -> None:
         # (t, true (x, y), estimator Pose, current ExecutionLease or None, vehicle state, operator's LinkState or
         # None, jammed, owner heard, command out)
@@ -90,19 +88,18 @@ class Trace:
         return self._columns[name]
 
     def _build(self) -> None:
-        c: dict[str, list] = {name: [] for name in self.COLUMNS}
-        for t, true, p, cur, state, link, jammed, heard, cmd in self.rows:
-            c["t"].append(t)
-            c["true"].append(true)
-            c["est"].append((p.x, p.y))
-            c["holder"].append(0 if cur is None else int(cur.holder))
-            c["index"].append(-1 if cur is None else cur.index)
-            c["state"].append(state)
-            c["link"].append(0.0 if link is None or jammed else link.delivery)
-            c["rssi"].append(math.nan if link is None else link.rssi_dbm)
-            c["heard"].append(heard)
-            c["cmd"].append(cmd)
-        self._columns, self._built = c, len(self.rows)
+        # one transpose in C, then a comprehension for each column that needs converting
+        columns = [list(c) for c in zip(*self.rows)] or [[] for _ in range(9)]
+        t, true, poses, leases, state, links, jammed, heard, cmd = columns
+        self._columns = {
+            "t": t, "true": true, "state": state, "heard": heard, "cmd": cmd,
+            "est": [(p.x, p.y) for p in poses],
+            "holder": [0 if cur is None else int(cur.holder) for cur in leases],
+            "index": [-1 if cur is None else cur.index for cur in leases],
+            "link": [0.0 if link is None or jam else link.delivery for link, jam in zip(links, jammed)],
+            "rssi": [math.nan if link is None else link.rssi_dbm for link in links],
+        }
+        self._built = len(self.rows)
 
     t = _column("t")
     true = _column("true")  # the robot's true (x, y)
