@@ -9,6 +9,7 @@ step (a velocity-controlled base, as real robots expose).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,6 +33,15 @@ def _touching(space: pymunk.Space, shape: pymunk.Shape) -> bool:
     return bool(lib.cpSpaceShapeQuery(space._space, shape._shape, ffi.NULL, ffi.NULL))
 
 
+def normal_draws(rng: np.random.Generator, block: int = 1024) -> Iterator[float]:
+    """``rng.standard_normal()`` again and again: the same floats in the same order (numpy fills an array with the
+    very draw it makes for a scalar), fetched a block at a time, as a scalar draw costs ten times a ``next``. Only
+    for a stream nothing else draws from: the generator runs up to a block ahead. Nothing is drawn before the
+    first ``next``, so draws made from ``rng`` before that come first, as before."""
+    while True:
+        yield from rng.standard_normal(block).tolist()
+
+
 def _clamp(v: float, lo: float, hi: float) -> float:
     """``max(lo, min(hi, v))`` exactly (ties, signed zeros and NaN alike), without two builtin calls a tick."""
     v = v if v < hi else hi
@@ -52,6 +62,8 @@ class Robot:
     def __init__(self, world: World, x: float, y: float, yaw: float, rng: np.random.Generator, radius: float,
                  max_speed: float, max_accel: float, max_yaw_rate: float, max_yaw_accel: float) -> None:
         self.rng = rng
+        # the physics noise: only standard normals, drawn from here once the robot is built
+        self.normal = normal_draws(rng).__next__
         self.max_speed, self.max_accel = max_speed, max_accel
         self.max_yaw_rate, self.max_yaw_accel = max_yaw_rate, max_yaw_accel
         self.body = pymunk.Body(10.0, math.inf)
@@ -146,9 +158,9 @@ class Rover(Robot):
 
     def odometry_speed(self, dt: float) -> float:
         s = self.spec
-        slip = s.slip_std * (1.0 + abs(self.yaw_rate)) * self.rng.standard_normal()
+        slip = s.slip_std * (1.0 + abs(self.yaw_rate)) * self.normal()
         # wheels report the commanded wheel speed: against a wall they spin while the body does not move
-        return self.speed * self.scale * (1.0 + slip) + s.wheel_noise * self.rng.standard_normal()
+        return self.speed * self.scale * (1.0 + slip) + s.wheel_noise * self.normal()
 
 
 @dataclass(frozen=True)
@@ -223,7 +235,7 @@ class Legged(Robot):
         if moving and (old < 0.5 <= self.phase or self.phase < old):
             # touchdown of a diagonal pair: Raibert foot placement ahead of the hip, plus slip
             self.steps += 1
-            self.slip = self.spec.slip_std * self.rng.standard_normal()
+            self.slip = self.spec.slip_std * self.normal()
             pair = (0, 3) if self.phase < 0.5 else (1, 2)
             hips = self._hips()
             x, y, a = self.pose
@@ -235,7 +247,7 @@ class Legged(Robot):
     def odometry_speed(self, dt: float) -> float:
         # stance-foot kinematics measure the body's motion relative to the feet, wrong by the step's slip; a
         # body held by a wall while the gait goes on slips its stance feet, and the legs still report the gait
-        return self.speed * (1.0 + self.slip) + self.spec.leg_odo_noise * self.rng.standard_normal()
+        return self.speed * (1.0 + self.slip) + self.spec.leg_odo_noise * self.normal()
 
 
 def make_robot(kind: str, world: World, x: float, y: float, yaw: float, rng: np.random.Generator) -> Robot:

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from pymunk._chipmunk_cffi import lib
 
-from sim.robots import Robot
+from sim.robots import Robot, normal_draws
 from sim.world import World
 from vehicle.io import Fix, Readings
 
@@ -42,6 +42,7 @@ class Sensors:
         # adding it did not change what the other sensors draw for a given seed
         self.imu_rng = np.random.Generator(rng.bit_generator.jumped())
         self.accel_bias = self.imu_rng.normal(0.0, spec.accel_bias0)
+        self.imu_normal = normal_draws(self.imu_rng).__next__  # the accelerometer noise: all the IMU draws after
         self._next_fix = 0.0
         self._next_heading = 0.0
         self.fixes = 0
@@ -71,5 +72,5 @@ class Sensors:
         if t + 1e-9 >= self._next_heading:
             self._next_heading = t + 1.0 / s.heading_hz
             heading = robot.pose[2] + s.heading_std * r.standard_normal()
-        accel = robot.accel + self.accel_bias + s.accel_noise * self.imu_rng.standard_normal()
+        accel = robot.accel + self.accel_bias + s.accel_noise * self.imu_normal()
         return Readings(t, robot.odometry_speed(dt), gyro, fix, heading, s.heading_std, accel)
