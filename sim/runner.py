@@ -75,13 +75,14 @@ def _column(name: str) -> property:
 class Trace:
     """Per-tick record for metrics and plots.
 
-    The tick appends one row of the objects it already holds (the estimator's pose, the current lease, the
-    operator's channel state: all immutable), a single append instead of ten and no per-tick conversions; the
-    named columns (``t``, ``true``, ``est``, ...) are built from the rows when first read after new ticks."""
+    The tick appends one row of plain numbers (one append instead of ten); the named columns (``t``, ``true``,
+    ``est``, ...) are built from the rows when first read after new ticks. A row holds only floats, ints, bools
+    and tuples of floats, never an object of the run (a pose, a lease, a channel state): the garbage collector
+    then stops tracking it, and tens of thousands of rows kept alive do not make every full collection slower."""
 
     def __init__(self) -> None:
-        # (t, true (x, y), estimator Pose, current ExecutionLease or None, vehicle state, operator's LinkState or
-        # None, jammed, owner heard, command out)
+        # (t, true (x, y), estimated x, estimated y, holder, index, vehicle state, delivery to the operator's
+        # station, its RSSI, owner heard, command out)
         self.rows: list[tuple] = []
         self._built = -1
         self._columns: dict[str, list] = {}
@@ -92,17 +93,10 @@ class Trace:
         return self._columns[name]
 
     def _build(self) -> None:
-        # one transpose in C, then a comprehension for each column that needs converting
-        columns = [list(c) for c in zip(*self.rows, strict=True)] or [[] for _ in range(9)]
-        t, true, poses, leases, state, links, jammed, heard, cmd = columns
-        self._columns = {
-            "t": t, "true": true, "state": state, "heard": heard, "cmd": cmd,
-            "est": [(p.x, p.y) for p in poses],
-            "holder": [0 if cur is None else int(cur.holder) for cur in leases],
-            "index": [-1 if cur is None else cur.index for cur in leases],
-            "link": [0.0 if link is None or jam else link.delivery for link, jam in zip(links, jammed, strict=True)],
-            "rssi": [math.nan if link is None else link.rssi_dbm for link in links],
-        }
+        columns = [list(c) for c in zip(*self.rows, strict=True)] or [[] for _ in range(11)]
+        t, true, ex, ey, holder, index, state, link, rssi, heard, cmd = columns
+        self._columns = {"t": t, "true": true, "est": list(zip(ex, ey, strict=True)), "holder": holder,
+                         "index": index, "state": state, "link": link, "rssi": rssi, "heard": heard, "cmd": cmd}
         self._built = len(self.rows)
 
     t = _column("t")
@@ -324,10 +318,19 @@ class Run:
     # ----- recording -----------------------------------------------------------------------------------------
     def _record(self, t: float, pos: tuple[float, float]) -> None:
         v, tr = self.vehicle, self.trace
+        p = v.estimator.pose
         cur = v.book.current
-        op = self._operator
-        jammed = bool(self.jams) and self._jammed(op.name, t)
-        tr.rows.append((t, pos, v.estimator.pose, cur, v.state(), op.state, jammed, v.link_is_good, v.command_out))
+        if cur is None:
+            holder, index = 0, -1
+        else:
+            holder, index = int(cur.holder), cur.index
+        state = self._operator.state
+        if state is None:
+            link, rssi = 0.0, math.nan
+        else:
+            link = 0.0 if self.jams and self._jammed(self._operator.name, t) else state.delivery
+            rssi = state.rssi_dbm
+        tr.rows.append((t, pos, p.x, p.y, holder, index, v.state(), link, rssi, v.link_is_good, v.command_out))
         if v.setpoint is not None:
             self._audit(v)
         returning = cur is not None and cur.holder is Holder.RETURN_SERVICE
