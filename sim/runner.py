@@ -77,13 +77,13 @@ class Trace:
     """Per-tick record for metrics and plots.
 
     The tick appends one row of plain numbers (one append instead of ten); the named columns (``t``, ``true``,
-    ``est``, ...) are built from the rows when first read after new ticks. A row holds only floats, ints, bools
-    and tuples of floats, never an object of the run (a pose, a lease, a channel state): the garbage collector
-    then stops tracking it, and tens of thousands of rows kept alive do not make every full collection slower."""
+    ``est``, ...) are built from the rows when first read after new ticks. A row holds only floats, ints and
+    bools, no tuple and no object of the run (a pose, a lease, a channel state), so the garbage collector stops
+    tracking it at its first collection: rows kept alive by the thousand cost the collector nothing after."""
 
     def __init__(self) -> None:
-        # (t, true (x, y), estimated x, estimated y, holder, index, vehicle state, delivery to the operator's
-        # station, its RSSI, owner heard, command out)
+        # (t, true x, true y, estimated x, estimated y, holder, index, vehicle state, delivery to the operator's
+        # station, its RSSI, owner heard, commanded speed, commanded yaw rate)
         self.rows: list[tuple] = []
         self._built = -1
         self._columns: dict[str, list] = {}
@@ -94,10 +94,11 @@ class Trace:
         return self._columns[name]
 
     def _build(self) -> None:
-        columns = [list(c) for c in zip(*self.rows, strict=True)] or [[] for _ in range(11)]
-        t, true, ex, ey, holder, index, state, link, rssi, heard, cmd = columns
-        self._columns = {"t": t, "true": true, "est": list(zip(ex, ey, strict=True)), "holder": holder,
-                         "index": index, "state": state, "link": link, "rssi": rssi, "heard": heard, "cmd": cmd}
+        columns = [list(c) for c in zip(*self.rows, strict=True)] or [[] for _ in range(13)]
+        t, x, y, ex, ey, holder, index, state, link, rssi, heard, speed, yaw_rate = columns
+        self._columns = {"t": t, "true": list(zip(x, y, strict=True)), "est": list(zip(ex, ey, strict=True)),
+                         "holder": holder, "index": index, "state": state, "link": link, "rssi": rssi,
+                         "heard": heard, "cmd": list(zip(speed, yaw_rate, strict=True))}
         self._built = len(self.rows)
 
     t = _column("t")
@@ -344,7 +345,9 @@ class Run:
         else:
             link = 0.0 if self.jams and self._jammed(self._operator.name, t) else state.delivery
             rssi = state.rssi_dbm
-        tr.rows.append((t, pos, p.x, p.y, holder, index, v.state(), link, rssi, v.link_is_good, v.command_out))
+        speed, yaw_rate = v.command_out
+        tr.rows.append((t, pos[0], pos[1], p.x, p.y, holder, index, v.state(), link, rssi, v.link_is_good, speed,
+                        yaw_rate))
         if v.setpoint is not None:
             self._audit(v)
         returning = cur is not None and cur.holder is Holder.RETURN_SERVICE
@@ -359,8 +362,8 @@ class Run:
         if blk is not None:
             rows = tr.rows
             if len(rows) > 1:
-                a, b = rows[-2][1], pos
-                blk.distance += math.hypot(b[0] - a[0], b[1] - a[1])
+                a = rows[-2]
+                blk.distance += math.hypot(pos[0] - a[1], pos[1] - a[2])
                 if v.command_out != (0.0, 0.0):
                     blk.driving_s += DT
             blk.collisions = self.world.collisions - blk.collisions0
@@ -382,7 +385,7 @@ class Run:
             if c.route is not None and c.route is not blk.route_obj:
                 blk.route_obj, blk.route, blk.target = c.route, c.route, c.target
                 # every baseline heads for home, where the estimator started: the true start of the run
-                blk.target_true = self.trace.rows[0][1] if c.target is not None and self.trace.rows else None
+                blk.target_true = self._true_of(0) if c.target is not None and self.trace.rows else None
             return
         st = v.service
         if st is None or v.service_index != blk.index:
@@ -413,7 +416,7 @@ class Run:
             return
         blk = self.blocks[-1]
         blk.ended = self.t
-        blk.end = self.trace.rows[-1][1] if self.trace.rows else blk.start
+        blk.end = self._true_of(-1) if self.trace.rows else blk.start
         for ev in self.vehicle.event_log:
             if ev.expired == blk.index and ev.t >= blk.started - 1e-9:
                 blk.reason = ev.reason.name
@@ -422,9 +425,12 @@ class Run:
     # ----- outputs -------------------------------------------------------------------------------------------
     def true_at(self, t: float) -> tuple[float, float]:
         """True position at simulated time ``t`` (nearest recorded tick)."""
-        rows = self.trace.rows
-        k = min(len(rows) - 1, max(0, int(round(t / DT)) - 1))
-        return rows[k][1]
+        return self._true_of(min(len(self.trace.rows) - 1, max(0, int(round(t / DT)) - 1)))
+
+    def _true_of(self, k: int) -> tuple[float, float]:
+        """The true position recorded at tick ``k`` (a row, so the columns need not be built during the run)."""
+        row = self.trace.rows[k]
+        return row[1], row[2]
 
     @property
     def lease_events(self) -> list[dict]:
