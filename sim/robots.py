@@ -202,6 +202,9 @@ class Legged(Robot):
         self.slip = 0.0
         self.steps = 0
         self.feet = self._nominal_feet()
+        # the divisors of ``limits``, fixed by the geometry: worked out once, not on every tick
+        self._stride_divisor = max(1e-6, self.max_stride)
+        self._speed_divisor = self.max_speed + 1e-6
 
     def _hips(self) -> list[tuple[float, float]]:
         x, y, a = self.pose
@@ -219,12 +222,12 @@ class Legged(Robot):
     def limits(self, speed: float, yaw_rate: float) -> tuple[float, float]:
         s = self.spec
         # choose the step frequency for this speed, then clamp speed to what the stride allows at that frequency
-        need_hz = 2.0 * abs(speed) / max(1e-6, self.max_stride)
+        need_hz = 2.0 * abs(speed) / self._stride_divisor
         self.step_hz = _clamp(need_hz, s.min_step_hz, s.max_step_hz)
         cap = self.max_stride * self.step_hz / 2.0
         speed = _clamp(speed, -cap, cap)
         # turning also uses up stride: the outer feet travel further
-        turn_cap = s.max_yaw_rate * max(0.3, 1.0 - abs(speed) / (self.max_speed + 1e-6))
+        turn_cap = s.max_yaw_rate * max(0.3, 1.0 - abs(speed) / self._speed_divisor)
         return speed, _clamp(yaw_rate, -turn_cap, turn_cap)
 
     def after_step(self, dt: float) -> None:
