@@ -148,6 +148,9 @@ class GroundStation:
         self.parser.robust_parsing = True
         self.vehicle = Vehicle()
         self.pending: dict[int, Pending] = {}
+        # no later than the oldest send of a command still unanswered (inf: none): until COMMAND_RETRY after it,
+        # no retry can be due, and the tick need not walk every command ever sent
+        self._oldest_unanswered = math.inf
         self.transfer: Transfer | None = None
         self.events: list[LeaseEventRecord] = []
         self.texts: list[tuple[float, str]] = []
@@ -183,14 +186,16 @@ class GroundStation:
         if t >= self.next_heartbeat:
             self.next_heartbeat = t + 1.0
             self.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, mav.MAV_STATE_ACTIVE)
-        for p in self.pending.values():
-            if not p.done and t - p.sent_at >= COMMAND_RETRY:
-                if p.tries >= COMMAND_TRIES:
-                    p.done = True
-                else:
-                    p.tries += 1
-                    p.sent_at = t
-                    self._send_command(p, confirmation=p.tries - 1)
+        if t - self._oldest_unanswered >= COMMAND_RETRY:
+            for p in self.pending.values():
+                if not p.done and t - p.sent_at >= COMMAND_RETRY:
+                    if p.tries >= COMMAND_TRIES:
+                        p.done = True
+                    else:
+                        p.tries += 1
+                        p.sent_at = t
+                        self._send_command(p, confirmation=p.tries - 1)
+            self._oldest_unanswered = min((p.sent_at for p in self.pending.values() if not p.done), default=math.inf)
         if self.transfer is not None and not self.transfer.done:
             self._transfer_tick(t)
         if self.teleop is not None and t >= self.next_teleop:
@@ -206,6 +211,7 @@ class GroundStation:
         p7 = tuple(params) + (0.0,) * (7 - len(params))
         p = Pending(command, p7, self.t)
         self.pending[command] = p
+        self._oldest_unanswered = min(self._oldest_unanswered, p.sent_at)
         self._send_command(p, 0)
         return p
 

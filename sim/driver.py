@@ -6,6 +6,7 @@ physics between ticks with ``advance``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -33,12 +34,9 @@ class SimDriver:
         self.robot: Robot = make_robot(vehicle, self.world, x, y, yaw, rng)
         self.sensors = Sensors(self.robot, self.world, rng if sensor_rng is None else sensor_rng)
         self.mav_type = self.robot.mav_type
-
-    def command(self, speed: float, yaw_rate: float) -> None:
-        self.robot.command(speed, yaw_rate)
-
-    def read(self, t: float, dt: float) -> Readings:
-        return self.sensors.read(t, dt)
+        # the vehicle calls these every tick: the robot's and the sensors' own methods, with no forwarding call
+        self.command: Callable[[float, float], None] = self.robot.command
+        self.read: Callable[[float, float], Readings] = self.sensors.read
 
     def advance(self, dt: float) -> None:
         """One physics step of ``dt`` seconds."""

@@ -9,10 +9,12 @@ step (a velocity-controlled base, as real robots expose).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
 import pymunk
+from pymunk._chipmunk_cffi import ffi, lib
 
 from sim.world import ROBOT, ROBOT_FILTER, World
 
@@ -20,6 +22,24 @@ from sim.world import ROBOT, ROBOT_FILTER, World
 # calls the property's own setter instead (the same chipmunk call, half the cost)
 _SET_VELOCITY = pymunk.Body.velocity.fset
 _SET_ANGULAR_VELOCITY = pymunk.Body.angular_velocity.fset
+# and its getters wrap chipmunk's vector in a new Vec2d: ``after_step`` reads chipmunk's own (the same doubles)
+_GET_POSITION, _GET_VELOCITY, _GET_ANGLE = lib.cpBodyGetPosition, lib.cpBodyGetVelocity, lib.cpBodyGetAngle
+
+
+def _touching(space: pymunk.Space, shape: pymunk.Shape) -> bool:
+    """Whether ``shape`` overlaps another non-sensor shape: chipmunk's shape query without a callback, so
+    pymunk builds no result list and makes no Python call per hit. The world has no sensor shapes, so this is
+    ``bool(space.shape_query(shape))`` at a fraction of its cost, and most ticks the robot touches nothing."""
+    return bool(lib.cpSpaceShapeQuery(space._space, shape._shape, ffi.NULL, ffi.NULL))
+
+
+def normal_draws(rng: np.random.Generator, block: int = 1024) -> Iterator[float]:
+    """``rng.standard_normal()`` again and again: the same floats in the same order (numpy fills an array with the
+    very draw it makes for a scalar), fetched a block at a time, as a scalar draw costs ten times a ``next``. Only
+    for a stream nothing else draws from: the generator runs up to a block ahead. Nothing is drawn before the
+    first ``next``, so draws made from ``rng`` before that come first, as before."""
+    while True:
+        yield from rng.standard_normal(block).tolist()
 
 
 def _clamp(v: float, lo: float, hi: float) -> float:
@@ -42,6 +62,8 @@ class Robot:
     def __init__(self, world: World, x: float, y: float, yaw: float, rng: np.random.Generator, radius: float,
                  max_speed: float, max_accel: float, max_yaw_rate: float, max_yaw_accel: float) -> None:
         self.rng = rng
+        # the physics noise: only standard normals, drawn from here once the robot is built
+        self.normal = normal_draws(rng).__next__
         self.max_speed, self.max_accel = max_speed, max_accel
         self.max_yaw_rate, self.max_yaw_accel = max_yaw_rate, max_yaw_accel
         self.body = pymunk.Body(10.0, math.inf)
@@ -77,21 +99,21 @@ class Robot:
         a = self._pose[2]
         vx, vy = self.speed * math.cos(a), self.speed * math.sin(a)
         # a velocity-controlled base pushes against a wall but cannot drive into it: drop the inward component
-        for hit in self.space.shape_query(self.shape):
-            if hit.shape is None or hit.shape.body is self.body:
-                continue
-            n = hit.contact_point_set.normal  # from our shape towards the other one
-            into = vx * n.x + vy * n.y
-            if into > 0:
-                vx, vy = vx - into * n.x, vy - into * n.y
+        if _touching(self.space, self.shape):
+            for hit in self.space.shape_query(self.shape):
+                if hit.shape is None or hit.shape.body is self.body:
+                    continue
+                n = hit.contact_point_set.normal  # from our shape towards the other one
+                into = vx * n.x + vy * n.y
+                if into > 0:
+                    vx, vy = vx - into * n.x, vy - into * n.y
         _SET_VELOCITY(self.body, (vx, vy))
         _SET_ANGULAR_VELOCITY(self.body, self.yaw_rate)
 
     def after_step(self, dt: float) -> None:
-        body = self.body
-        x, y = body.position
-        vx, vy = body.velocity
-        a = body.angle
+        body = self.body._body
+        p, v, a = _GET_POSITION(body), _GET_VELOCITY(body), _GET_ANGLE(body)
+        x, y, vx, vy = p.x, p.y, v.x, v.y
         self._pose = (x, y, a)
         speed = vx * math.cos(a) + vy * math.sin(a)
         self.accel = (speed - self.true_speed) / dt
@@ -136,9 +158,9 @@ class Rover(Robot):
 
     def odometry_speed(self, dt: float) -> float:
         s = self.spec
-        slip = s.slip_std * (1.0 + abs(self.yaw_rate)) * self.rng.standard_normal()
+        slip = s.slip_std * (1.0 + abs(self.yaw_rate)) * self.normal()
         # wheels report the commanded wheel speed: against a wall they spin while the body does not move
-        return self.speed * self.scale * (1.0 + slip) + s.wheel_noise * self.rng.standard_normal()
+        return self.speed * self.scale * (1.0 + slip) + s.wheel_noise * self.normal()
 
 
 @dataclass(frozen=True)
@@ -180,6 +202,9 @@ class Legged(Robot):
         self.slip = 0.0
         self.steps = 0
         self.feet = self._nominal_feet()
+        # the divisors of ``limits``, fixed by the geometry: worked out once, not on every tick
+        self._stride_divisor = max(1e-6, self.max_stride)
+        self._speed_divisor = self.max_speed + 1e-6
 
     def _hips(self) -> list[tuple[float, float]]:
         x, y, a = self.pose
@@ -197,12 +222,12 @@ class Legged(Robot):
     def limits(self, speed: float, yaw_rate: float) -> tuple[float, float]:
         s = self.spec
         # choose the step frequency for this speed, then clamp speed to what the stride allows at that frequency
-        need_hz = 2.0 * abs(speed) / max(1e-6, self.max_stride)
+        need_hz = 2.0 * abs(speed) / self._stride_divisor
         self.step_hz = _clamp(need_hz, s.min_step_hz, s.max_step_hz)
         cap = self.max_stride * self.step_hz / 2.0
         speed = _clamp(speed, -cap, cap)
         # turning also uses up stride: the outer feet travel further
-        turn_cap = s.max_yaw_rate * max(0.3, 1.0 - abs(speed) / (self.max_speed + 1e-6))
+        turn_cap = s.max_yaw_rate * max(0.3, 1.0 - abs(speed) / self._speed_divisor)
         return speed, _clamp(yaw_rate, -turn_cap, turn_cap)
 
     def after_step(self, dt: float) -> None:
@@ -213,7 +238,7 @@ class Legged(Robot):
         if moving and (old < 0.5 <= self.phase or self.phase < old):
             # touchdown of a diagonal pair: Raibert foot placement ahead of the hip, plus slip
             self.steps += 1
-            self.slip = self.spec.slip_std * self.rng.standard_normal()
+            self.slip = self.spec.slip_std * self.normal()
             pair = (0, 3) if self.phase < 0.5 else (1, 2)
             hips = self._hips()
             x, y, a = self.pose
@@ -225,7 +250,7 @@ class Legged(Robot):
     def odometry_speed(self, dt: float) -> float:
         # stance-foot kinematics measure the body's motion relative to the feet, wrong by the step's slip; a
         # body held by a wall while the gait goes on slips its stance feet, and the legs still report the gait
-        return self.speed * (1.0 + self.slip) + self.spec.leg_odo_noise * self.rng.standard_normal()
+        return self.speed * (1.0 + self.slip) + self.spec.leg_odo_noise * self.normal()
 
 
 def make_robot(kind: str, world: World, x: float, y: float, yaw: float, rng: np.random.Generator) -> Robot:

@@ -13,6 +13,7 @@ first COMMS_LOST, where only the policy differs.
 
 from __future__ import annotations
 
+import gc
 import json
 import math
 import struct
@@ -41,6 +42,10 @@ COMMAND_NAMES = {num: name for name, num in PLAN_COMMANDS.items()}
 # (1970, the UNIX epoch itself, made MAVProxy and QGroundControl show a log from before MAVLink existed).
 TLOG_EPOCH_US = 1_767_225_600 * 1_000_000
 _TLOG_STAMP = struct.Struct(">Q").pack
+# Tick k is at k / TICK_RATE s: the double nearest k * DT, which is what rounding the running sum to 9 decimals
+# every tick gave (for DT = 1/50 s the sum strays from k / 50 by far less than 1e-9 for days of ticks), at the
+# cost of a division instead of a ``round``
+TICK_RATE = round(1 / DT)
 
 
 @dataclass
@@ -63,20 +68,49 @@ class StationSim:
         self.up = ((self.name, "vehicle"), f"uplink.{self.name}")
 
 
-@dataclass
-class Trace:
-    """Per-tick record for metrics and plots."""
+def _column(name: str) -> property:
+    """A read-only ``Trace`` attribute: the list of one column over every tick recorded so far."""
+    return property(lambda trace: trace.column(name))
 
-    t: list[float] = field(default_factory=list)
-    true: list[tuple[float, float]] = field(default_factory=list)
-    est: list[tuple[float, float]] = field(default_factory=list)
-    holder: list[int] = field(default_factory=list)
-    index: list[int] = field(default_factory=list)
-    state: list[int] = field(default_factory=list)
-    link: list[float] = field(default_factory=list)  # delivery probability to the operator's station
-    rssi: list[float] = field(default_factory=list)
-    heard: list[bool] = field(default_factory=list)  # owner heard within LNK_GOOD_S (the vehicle's view)
-    cmd: list[tuple[float, float]] = field(default_factory=list)  # what the vehicle commanded the robot
+
+class Trace:
+    """Per-tick record for metrics and plots.
+
+    The tick appends one row of plain numbers (one append instead of ten); the named columns (``t``, ``true``,
+    ``est``, ...) are built from the rows when first read after new ticks. A row holds only floats, ints and
+    bools, no tuple and no object of the run (a pose, a lease, a channel state), so the garbage collector stops
+    tracking it at its first collection: rows kept alive by the thousand cost the collector nothing after."""
+
+    def __init__(self) -> None:
+        # (t, true x, true y, estimated x, estimated y, holder, index, vehicle state, delivery to the operator's
+        # station, its RSSI, owner heard, commanded speed, commanded yaw rate)
+        self.rows: list[tuple] = []
+        self._built = -1
+        self._columns: dict[str, list] = {}
+
+    def column(self, name: str) -> list:
+        if self._built != len(self.rows):
+            self._build()
+        return self._columns[name]
+
+    def _build(self) -> None:
+        columns = [list(c) for c in zip(*self.rows, strict=True)] or [[] for _ in range(13)]
+        t, x, y, ex, ey, holder, index, state, link, rssi, heard, speed, yaw_rate = columns
+        self._columns = {"t": t, "true": list(zip(x, y, strict=True)), "est": list(zip(ex, ey, strict=True)),
+                         "holder": holder, "index": index, "state": state, "link": link, "rssi": rssi,
+                         "heard": heard, "cmd": list(zip(speed, yaw_rate, strict=True))}
+        self._built = len(self.rows)
+
+    t = _column("t")
+    true = _column("true")  # the robot's true (x, y)
+    est = _column("est")  # the estimator's (x, y)
+    holder = _column("holder")
+    index = _column("index")
+    state = _column("state")
+    link = _column("link")  # delivery probability to the operator's station (0 while jammed)
+    rssi = _column("rssi")
+    heard = _column("heard")  # owner heard within LNK_GOOD_S (the vehicle's view)
+    cmd = _column("cmd")  # what the vehicle commanded the robot
 
 
 @dataclass
@@ -113,6 +147,7 @@ class Run:
         self.driver, self.vehicle, self.endpoint = simulated_vehicle(sc, self.kind, self.seed,
                                                                      contingency=make_policy(self.policy))
         self.world = self.driver.world
+        self.robot = self.driver.robot
         self.radio = Radio(sc.radio, self.world.attenuation_db, self.seed)
         self.radio_report = RadioReport()
         self.bus = LockstepBus()
@@ -128,6 +163,7 @@ class Run:
         self.events = sorted(sc.events, key=lambda e: e.t)
         self.jams: list[tuple[float, float, str]] = []  # (from, until, station or "")
         self.t = 0.0
+        self.ticks = 0
         self.duration = sc.duration if duration is None else duration
         self.trace = Trace()
         self.blocks: list[BlockRecord] = []
@@ -145,20 +181,33 @@ class Run:
 
     # ----- the loop ------------------------------------------------------------------------------------------
     def run(self) -> Run:
+        """Every tick to the end (or a ``stop`` event).
+
+        The objects alive before the loop (the libraries, the dialect, the scenario: some 80,000) are frozen out
+        of garbage collection while it runs, as none of them becomes garbage there: a full collection during the
+        run then scans only what the run made, instead of spending tens of milliseconds on them each time. They
+        are handed back to the collector afterwards, unless the caller had frozen objects of its own."""
         w0 = time.perf_counter()
         n = int(round(self.duration / DT))
         shown = -1
         tty = sys.stderr.isatty()
         step = 2 if tty else 25  # a redrawn bar on a terminal, a few lines in a log
-        for k in range(n):
-            self.step()
-            if self.stopped:
-                break
-            if self.progress and (pct := 100 * (k + 1) // n) != shown and pct % step == 0:
-                shown = pct
-                bar = "#" * (pct // 4) + "." * (25 - pct // 4)
-                print(f"\r  [{bar}] {pct:3d}%  t={self.t:6.1f} s", end="" if tty else "\n", file=sys.stderr,
-                      flush=True)
+        freeze = gc.get_freeze_count() == 0
+        if freeze:
+            gc.freeze()
+        try:
+            for k in range(n):
+                self.step()
+                if self.stopped:
+                    break
+                if self.progress and (pct := 100 * (k + 1) // n) != shown and pct % step == 0:
+                    shown = pct
+                    bar = "#" * (pct // 4) + "." * (25 - pct // 4)
+                    print(f"\r  [{bar}] {pct:3d}%  t={self.t:6.1f} s", end="" if tty else "\n", file=sys.stderr,
+                          flush=True)
+        finally:
+            if freeze:
+                gc.unfreeze()
         if self.progress and tty:
             print(file=sys.stderr)
         self.wall = time.perf_counter() - w0
@@ -168,7 +217,8 @@ class Run:
     def step(self) -> None:
         """One tick. Work nothing waits for is skipped (an empty queue, a dead station, a timed event not due
         yet), never reordered: the radio draws each packet's fate in the same order as ever."""
-        self.t = t = round(self.t + DT, 9)
+        self.ticks += 1
+        self.t = t = self.ticks / TICK_RATE
         v, ep, bus, stations = self.vehicle, self.endpoint, self.bus, self._station_list
         for data, _src in bus.receive("vehicle", t):
             ep.receive(data, t)
@@ -198,7 +248,7 @@ class Run:
                 elif e.reason.name == "LINK_REGAINED":
                     self.regains.append((e.t, v.book.link.contact_since))
         self.driver.advance(DT)
-        pos = self.driver.pose[:2]
+        pos = self.robot.pose[:2]
         radio = self.radio
         for st in stations:
             st.state = radio.link(st.antenna, st.power_dbm, pos) if st.alive else None
@@ -285,25 +335,19 @@ class Run:
         v, tr = self.vehicle, self.trace
         p = v.estimator.pose
         cur = v.book.current
-        tr.t.append(t)
-        tr.true.append(pos)  # the robot's pose is plain floats already
-        tr.est.append((p.x, p.y))
         if cur is None:
-            tr.holder.append(0)
-            tr.index.append(-1)
+            holder, index = 0, -1
         else:
-            tr.holder.append(int(cur.holder))
-            tr.index.append(cur.index)
-        tr.state.append(v.state())
+            holder, index = int(cur.holder), cur.index
         state = self._operator.state
         if state is None:
-            tr.link.append(0.0)
-            tr.rssi.append(math.nan)
+            link, rssi = 0.0, math.nan
         else:
-            tr.link.append(0.0 if self.jams and self._jammed(self._operator.name, t) else state.delivery)
-            tr.rssi.append(state.rssi_dbm)
-        tr.heard.append(v.link_is_good)
-        tr.cmd.append(v.command_out)
+            link = 0.0 if self.jams and self._jammed(self._operator.name, t) else state.delivery
+            rssi = state.rssi_dbm
+        speed, yaw_rate = v.command_out
+        tr.rows.append((t, pos[0], pos[1], p.x, p.y, holder, index, v.state(), link, rssi, v.link_is_good, speed,
+                        yaw_rate))
         if v.setpoint is not None:
             self._audit(v)
         returning = cur is not None and cur.holder is Holder.RETURN_SERVICE
@@ -316,9 +360,10 @@ class Run:
                               collisions0=self.world.collisions)
             self.blocks.append(blk)
         if blk is not None:
-            if len(tr.true) > 1:
-                a, b = tr.true[-2], tr.true[-1]
-                blk.distance += math.hypot(b[0] - a[0], b[1] - a[1])
+            rows = tr.rows
+            if len(rows) > 1:
+                a = rows[-2]
+                blk.distance += math.hypot(pos[0] - a[1], pos[1] - a[2])
                 if v.command_out != (0.0, 0.0):
                     blk.driving_s += DT
             blk.collisions = self.world.collisions - blk.collisions0
@@ -340,7 +385,7 @@ class Run:
             if c.route is not None and c.route is not blk.route_obj:
                 blk.route_obj, blk.route, blk.target = c.route, c.route, c.target
                 # every baseline heads for home, where the estimator started: the true start of the run
-                blk.target_true = self.trace.true[0] if c.target is not None and self.trace.true else None
+                blk.target_true = self._true_of(0) if c.target is not None and self.trace.rows else None
             return
         st = v.service
         if st is None or v.service_index != blk.index:
@@ -371,7 +416,7 @@ class Run:
             return
         blk = self.blocks[-1]
         blk.ended = self.t
-        blk.end = self.trace.true[-1] if self.trace.true else blk.start
+        blk.end = self._true_of(-1) if self.trace.rows else blk.start
         for ev in self.vehicle.event_log:
             if ev.expired == blk.index and ev.t >= blk.started - 1e-9:
                 blk.reason = ev.reason.name
@@ -380,8 +425,12 @@ class Run:
     # ----- outputs -------------------------------------------------------------------------------------------
     def true_at(self, t: float) -> tuple[float, float]:
         """True position at simulated time ``t`` (nearest recorded tick)."""
-        k = min(len(self.trace.t) - 1, max(0, int(round(t / DT)) - 1))
-        return self.trace.true[k]
+        return self._true_of(min(len(self.trace.rows) - 1, max(0, int(round(t / DT)) - 1)))
+
+    def _true_of(self, k: int) -> tuple[float, float]:
+        """The true position recorded at tick ``k`` (a row, so the columns need not be built during the run)."""
+        row = self.trace.rows[k]
+        return row[1], row[2]
 
     @property
     def lease_events(self) -> list[dict]:

@@ -6,6 +6,7 @@ Walls are real collision shapes (the robots are pymunk bodies) and also what the
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import pymunk
@@ -62,6 +63,7 @@ class World:
                 seg.attenuation_db = wall.attenuation_db  # type: ignore[attr-defined]
                 self.space.add(seg)
         self.space.on_collision(ROBOT, WALL, begin=self._begin, separate=self._separate)
+        self.step: Callable[[float], None] = self.space.step  # one physics step of dt seconds (every tick)
 
     def _begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: object) -> None:
         if self._touching == 0:
@@ -70,9 +72,6 @@ class World:
 
     def _separate(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: object) -> None:
         self._touching = max(0, self._touching - 1)
-
-    def step(self, dt: float) -> None:
-        self.space.step(dt)
 
     def gps_denied(self, x: float, y: float) -> bool:
         return any(point_in_polygon(x, y, poly) for poly in self.denied)
