@@ -27,3 +27,16 @@ def test_evolve_keeps_the_value_frozen_and_refuses_unknown_fields():
         w.lost = False  # type: ignore[misc]
     with pytest.raises(TypeError, match="no field 'lots'"):
         evolve(w, lots=True)
+
+
+@pytest.mark.parametrize("kind", [LeaseBook, LinkWatch, Delivery])
+def test_the_values_evolve_copies_check_nothing_it_would_skip(kind):
+    """``evolve`` copies the instance dictionary instead of calling ``__init__``: right only while the value has
+    no ``__post_init__`` check, no ``init=False`` field and no slots. A value that gains one must go back to
+    ``dataclasses.replace``; this says so before a check is silently skipped."""
+    import dataclasses
+
+    assert dataclasses.is_dataclass(kind) and kind.__dataclass_params__.frozen
+    assert not hasattr(kind, "__post_init__")
+    assert all(f.init for f in dataclasses.fields(kind))
+    assert not hasattr(kind, "__slots__")
