@@ -240,7 +240,7 @@ def summary(run: Run, m: dict) -> str:
         f" max displacement {f(m['max_displacement_m'], ' m')}, target error {f(m['final_target_error_m'], ' m', 2)}",
         f"  loss at {m['loss_position']}, at rest at {m['rest_position']}"
         f" (delivery {f(m['rest_link_quality'], '', 2)}), link regained by {m['regained_by'] or '-'},"
-        f" {m['link_cycles']} link losses (true frame)",
+        f" {m['link_cycles']} link loss{'' if m['link_cycles'] == 1 else 'es'} (true frame)",
         f"  collisions {m['collisions']} ({m['collisions_during_return']} during returns), stale commands executed"
         f" {m['stale_commands_executed']},"
         f" commands rejected {m['commands_rejected']}",
