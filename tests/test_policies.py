@@ -307,3 +307,20 @@ def test_baseline_path_driver_keeps_the_navigators_reverse_hysteresis():
     speed, yaw_rate, _ = driver.step(vehicle, 0.04, -0.02, 0.0, math.radians(-90.0))
     assert speed == 0.0 and yaw_rate > 0, "the direction flipped inside the hysteresis band"
     assert driver.reverse
+
+
+def test_baselines_report_holding_while_they_stand_still():
+    """What the operator's screen says must match what the robot does: a hold baseline reports HOLDING for its
+    whole block, and SmartRTL reports HOLDING while it waits FS_TIMEOUT after COMMS_LOST, then RETURNING."""
+    from vehicle.app import State
+
+    hold = Run(load("tunnel"), "rover", duration=TUNNEL_S, policy="hold").run()
+    lost = _comms_lost(hold)
+    k = int(round(lost / DT))
+    assert hold.trace.state[k + 5] == State.HOLDING
+    srtl = Run(load("tunnel"), "rover", duration=TUNNEL_S, policy="smartrtl").run()
+    lost = _comms_lost(srtl)
+    acted = srtl.vehicle.contingency.acted[0]
+    waiting = srtl.trace.state[int(round(lost / DT)) + 2: int(round(acted / DT)) - 2]
+    assert waiting and set(waiting) == {State.HOLDING}
+    assert srtl.trace.state[int(round(acted / DT)) + 5] == State.RETURNING

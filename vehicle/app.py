@@ -91,6 +91,7 @@ class Contingency(Protocol):
     """
 
     halts_on_regain: bool  # False: LINK_REGAINED does not end the running block (it runs to its own end)
+    holding: bool  # True while its rules keep the robot standing still (reported as HOLDING, not RETURNING)
 
     def observe(self, vehicle: Vehicle, t: float) -> None:
         """Every tick, after the estimator: a behaviour that keeps its own memory (SmartRTL's path) records."""
@@ -336,6 +337,8 @@ class Vehicle:
         cur = leases[0]
         if cur.holder is Holder.OPERATOR:
             return State.TELEOP if cur.claimed else State.AWAITING_CLAIM
+        if self.contingency is not None:
+            return State.HOLDING if self.contingency.holding else State.RETURNING
         st = self.service
         if st is None or st.item < 0:
             return State.RETURNING

@@ -58,6 +58,7 @@ class Baseline:
     ``acted`` holds when each return took over the robot (for SmartRTL, FS_TIMEOUT after the lease did)."""
 
     halts_on_regain = True
+    holding = False  # standing still by its rules right now (the vehicle then reports HOLDING)
 
     def __init__(self) -> None:
         self.chain: int | None = None

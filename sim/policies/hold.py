@@ -15,5 +15,7 @@ from vehicle.app import Vehicle
 
 
 class Hold(Baseline):
+    holding = True  # HOLD mode, the whole block
+
     def tick(self, vehicle: Vehicle, t: float, x: float, y: float, yaw: float) -> Command:
         return 0.0, 0.0, None

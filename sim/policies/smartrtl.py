@@ -138,6 +138,11 @@ class SmartRTL(Baseline):
             self.homed = True
         self.path.update(p.x, p.y, t)
 
+    @property
+    def holding(self) -> bool:
+        """Standing still between COMMS_LOST and the failsafe acting FS_TIMEOUT later."""
+        return self.returning and self.driver is None
+
     def begin(self, vehicle: Vehicle, t: float, x: float, y: float) -> None:
         """After a link loss SMART_RTL takes over only when the failsafe acts (``_act``); an operator's RTL (the
         mode switched by hand) takes over at once."""
