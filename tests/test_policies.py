@@ -21,7 +21,7 @@ from sim.policies import POLICY_NAMES, check_policy, make_policy
 from sim.policies.smartrtl import FS_TIMEOUT, SmartRTL, SmartRTLPath
 from sim.runner import Run
 from sim.scenario import load
-from vehicle.app import DT
+from vehicle.app import DT, State
 
 TUNNEL_S = 110.0  # the tunnel's link dies about 45 s in; a minute after is enough to see what each policy does
 
@@ -312,8 +312,6 @@ def test_baseline_path_driver_keeps_the_navigators_reverse_hysteresis():
 def test_baselines_report_holding_while_they_stand_still():
     """What the operator's screen says must match what the robot does: a hold baseline reports HOLDING for its
     whole block, and SmartRTL reports HOLDING while it waits FS_TIMEOUT after COMMS_LOST, then RETURNING."""
-    from vehicle.app import State
-
     hold = Run(load("tunnel"), "rover", duration=TUNNEL_S, policy="hold").run()
     lost = _comms_lost(hold)
     k = int(round(lost / DT))
@@ -324,3 +322,18 @@ def test_baselines_report_holding_while_they_stand_still():
     waiting = srtl.trace.state[int(round(lost / DT)) + 2: int(round(acted / DT)) - 2]
     assert waiting and set(waiting) == {State.HOLDING}
     assert srtl.trace.state[int(round(acted / DT)) + 5] == State.RETURNING
+
+
+def test_a_baseline_changing_state_is_announced_in_that_tick():
+    """Telemetry re-reads the lease status only when something it depends on changed: SmartRTL going from its
+    FS_TIMEOUT wait (HOLDING) to the retrace (RETURNING) changes no lease, so the telemetry must still see it, or
+    CURRENT_MODE would show the old mode until the link came back."""
+    r = Run(load("tunnel"), "rover", duration=TUNNEL_S, policy="smartrtl")
+    tel = r.endpoint.telemetry
+    seen = set()
+    for _ in range(int(round(TUNNEL_S / DT))):
+        r.step()
+        state = r.vehicle.state()
+        seen.add(state)
+        assert tel.last_status_key[-1] == state and tel.last_mode == tel.custom_mode(), r.t
+    assert {State.HOLDING, State.RETURNING} <= seen

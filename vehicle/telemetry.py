@@ -67,7 +67,7 @@ class Telemetry:
         self.last_status_key: tuple | None = None
         self.last_control_key: tuple | None = None
         self.last_mode: int | None = None
-        self._seen: tuple = (None, None, None)  # (book, service, holding) the keys were last computed from
+        self._seen: tuple = (None, None, None, None)  # (book, service, holding, baseline holding) of the keys
 
     def boot_ms(self, t: float) -> int:
         return int(max(0.0, t - self.boot_t) * 1000) & 0xFFFFFFFF
@@ -94,10 +94,13 @@ class Telemetry:
             self.next_heartbeat = t + 1.0
             self._heartbeat(t)
         seen = self._seen
-        if v.book is not seen[0] or v.service is not seen[1] or v.holding != seen[2]:
-            # the keys below are functions of these three immutable values alone: most ticks they are the very
-            # same objects, and nothing can have changed (so the tuple is only built when one did)
-            self._seen = (v.book, v.service, v.holding)
+        c = v.contingency
+        held = c is not None and c.holding
+        if v.book is not seen[0] or v.service is not seen[1] or v.holding != seen[2] or held != seen[3]:
+            # the keys below are functions of these values alone (a baseline's own hold included: it changes the
+            # state with no lease change): most ticks they are the very same objects, and nothing can have
+            # changed (so the tuple is only built when one did)
+            self._seen = (v.book, v.service, v.holding, held)
             self._on_change(t)
         if t + 1e-9 < self.next_due:
             return
