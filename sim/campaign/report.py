@@ -49,15 +49,20 @@ def _per_policy(rows: list[dict], value) -> dict[str, tuple[list[float], int]]:
     return out
 
 
-def plot_time_to_link(rows: list[dict], path: Path) -> Path:
-    fig, ax = plt.subplots(figsize=(8, 5))
-    for policy, (vals, n) in sorted(_per_policy(rows, time_to_link).items()):
+def _cdf_panel(ax, rows: list[dict], value, xlabel: str, ylabel: str) -> None:
+    """One CDF per policy of ``value(row)`` on ``ax``, labelled."""
+    for policy, (vals, n) in sorted(_per_policy(rows, value).items()):
         _cdf(ax, vals, n, policy)
-    ax.set_xlabel("time from link loss to link regained (s)")
-    ax.set_ylabel("fraction of trials with a loss")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
     ax.set_ylim(0, 1.02)
     ax.grid(alpha=0.3)
     _legend(ax)
+
+
+def plot_time_to_link(rows: list[dict], path: Path) -> Path:
+    fig, ax = plt.subplots(figsize=(8, 5))
+    _cdf_panel(ax, rows, time_to_link, "time from link loss to link regained (s)", "fraction of trials with a loss")
     ax.set_title("Time to link, per policy (a curve that stays below 1: links that never came back)")
     return save(fig, path)
 
@@ -68,13 +73,7 @@ def plot_distances(rows: list[dict], path: Path) -> Path:
                "distance driven on return (m)"),
               (rest_from_loss, "distance from the loss point at rest (m)"))
     for ax, (value, label) in zip(axes, panels, strict=True):
-        for policy, (vals, n) in sorted(_per_policy(rows, value).items()):
-            _cdf(ax, vals, n, policy)
-        ax.set_xlabel(label)
-        ax.set_ylabel("fraction of trials")
-        ax.set_ylim(0, 1.02)
-        ax.grid(alpha=0.3)
-        _legend(ax)
+        _cdf_panel(ax, rows, value, label, "fraction of trials")
     fig.suptitle("Distances, per policy")
     return save(fig, path)
 
