@@ -156,8 +156,7 @@ class Run:
             gs = GroundStation(s.sysid, 190)
             self.stations[s.name] = StationSim(s.name, gs, (s.x, s.y), s.power_dbm, s.name == sc.operator_station)
         self._station_list = list(self.stations.values())  # the tick walks it four times
-        self._operator = self.stations[sc.operator_station]
-        op = self.stations[sc.operator_station]
+        self._operator = op = self.stations[sc.operator_station]
         op.operator = Operator(op.gs, sc.route, sc.resume_route, from_plan_items(sc.plan), sc.teleop,
                                    attempts=sc.attempts)
         self.events = sorted(sc.events, key=lambda e: e.t)
@@ -290,7 +289,7 @@ class Run:
 
     def _radio_status(self, t: float) -> None:
         """The operator's telemetry radio reports both ends' RSSI, as a SiK radio would."""
-        op = self.stations[self.scenario.operator_station]
+        op = self._operator
         if not op.alive or op.state is None:
             return
         data = self.radio_report.frame(op.state, jammed=self._jammed(op.name, t))

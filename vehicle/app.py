@@ -329,12 +329,10 @@ class Vehicle:
 
     # ----- queries -----------------------------------------------------------------------------------------
     def state(self) -> int:
-        """RETURNLINK_STATE now. (Asked every tick by telemetry and the record: the current lease is read from
-        the book's leases directly, as ``LeaseBook.current`` does.)"""
-        leases = self.book.leases
-        if not leases:
+        """RETURNLINK_STATE now."""
+        cur = self.book.current
+        if cur is None:
             return State.NO_OWNER
-        cur = leases[0]
         if cur.holder is Holder.OPERATOR:
             return State.TELEOP if cur.claimed else State.AWAITING_CLAIM
         if self.contingency is not None:
@@ -376,15 +374,14 @@ class Vehicle:
             self.last_fix, self.last_fix_t = (fix.x, fix.y), t
         p = est.pose
         book = self.book
-        good = self.link_is_good = book.owner is not None and book.link.good(t)  # as ``link_good(t)``
+        good = self.link_is_good = self.link_good(t)
         if self.contingency is not None:
             self.contingency.observe(self, t)
         self._crumbs.append(Crumb(p.x, p.y, t, p.std, good))
 
         self._apply(book.tick(t))
         book = self.book
-        leases = book.leases
-        cur = leases[0] if leases else None  # book.current
+        cur = book.current
         # a block about to start plans from the whole trail; afterwards crumbs wait for their true tag again
         starting = cur is not None and cur.holder is Holder.RETURN_SERVICE and self.service_index != cur.index
         self._lay_crumbs(t, flush=starting)
@@ -405,7 +402,7 @@ class Vehicle:
         good crumbs, and a later return must not take them for lost ones and drive away from the operator).
         """
         crumbs = self._crumbs
-        horizon = t if flush else t - self.params.values["LNK_GOOD_S"]  # (the dict itself: every tick)
+        horizon = t if flush else t - self.params["LNK_GOOD_S"]
         last = self.book.link.last_good
         add = self.trail.add
         while crumbs and crumbs[0].t <= horizon:
@@ -415,7 +412,7 @@ class Vehicle:
 
     def _control(self, t: float, x: float, y: float, yaw: float) -> tuple[float, float]:
         book = self.book
-        cur = book.leases[0] if book.leases else None  # book.current, read directly: this runs every tick
+        cur = book.current
         if cur is None or cur.holder is Holder.OPERATOR:
             self.service, self.service_index = None, None
             return self._teleop(t)
