@@ -177,16 +177,15 @@ class Radio:
         every caller (the real-time proxy, which has no lockstep time)."""
         self.sent += 1
         if stream is None or t is None:
-            u, jitter = self.rng.random(), self.rng.normal()
+            u, jitter = self.rng.random(), self.rng.normal()  # (both drawn: the shared stream's order)
         else:
             u, u1, u2 = self._uniforms(stream, t)
-            if u >= state.delivery:  # lost: its latency is never looked at, so it is not computed
-                self.lost += 1
-                return None
-            jitter = math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)  # Box-Muller
+            jitter = None  # Box-Muller below, only for a packet that arrives
         if u >= state.delivery:
             self.lost += 1
             return None
+        if jitter is None:
+            jitter = math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
         return max(0.0, self.p.latency_ms + self.p.jitter_ms * jitter) / 1000.0
 
     def arrival(self, state: LinkState, t: float, lane: object, stream: str | None = None) -> float | None:
