@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import cProfile
+import math
 import pstats
 import random
 import socket
@@ -149,6 +150,22 @@ def physics(run: Run) -> tuple[float, float]:
     return whole, max(0.0, sum(steps) - sum(empty))
 
 
+def machine_pace() -> float:
+    """CPU milliseconds of a fixed pure-Python loop (float arithmetic and dict stores, the interpreter work a tick
+    is made of), the best of three. This VM's pace drifts by a quarter over hours, with every figure above it:
+    printed beside them, it tells a slow spell from a slower commit."""
+    best = math.inf
+    for _ in range(3):
+        c0 = time.process_time()
+        table: dict[int, float] = {}
+        s = 0.0
+        for i in range(1_000_000):
+            s += (i % 7) * 0.5
+            table[i & 1023] = s
+        best = min(best, time.process_time() - c0)
+    return 1e3 * best
+
+
 def timed_run(kind: str) -> tuple[Run, float]:
     run = Run(load("tunnel"), kind, duration=MINUTES * 60)
     c0 = time.process_time()
@@ -230,6 +247,8 @@ def main() -> None:
               f"{' '.join(f'{v:.1f}' for v in full)}")
     print("floor: physics, sensors and estimator alone; physics: the robot's physics step alone; pymunk: its "
           "Space.step alone (the library's own floor)")
+    print(f"machine pace: {machine_pace():.0f} ms CPU for a fixed pure-Python loop (lower is faster; compare runs "
+          "taken at different times by it)")
     if not args.no_profile:
         for kind in kinds:
             print(f"\nwhere the {kind}'s tick goes (cProfile own time, helpers booked to their callers):")
