@@ -18,19 +18,19 @@ from pymunk._chipmunk_cffi import ffi, lib
 
 from sim.world import ROBOT, ROBOT_FILTER, World
 
-# pymunk's Body routes every attribute write through a Python ``__setattr__`` before the property: the tick
-# calls the property's own setter instead (the same chipmunk call, half the cost)
-_SET_VELOCITY = pymunk.Body.velocity.fset
-_SET_ANGULAR_VELOCITY = pymunk.Body.angular_velocity.fset
-# and its getters wrap chipmunk's vector in a new Vec2d: ``after_step`` reads chipmunk's own (the same doubles)
+# pymunk's Body routes every attribute write through a Python ``__setattr__`` and then a Python property setter
+# before the chipmunk call: the tick makes that very chipmunk call on the body's handle (the same doubles set,
+# a third of the cost). Its getters wrap chipmunk's vector in a new Vec2d: ``after_step`` reads chipmunk's own.
+_SET_VELOCITY, _SET_ANGULAR_VELOCITY = lib.cpBodySetVelocity, lib.cpBodySetAngularVelocity
 _GET_POSITION, _GET_VELOCITY, _GET_ANGLE = lib.cpBodyGetPosition, lib.cpBodyGetVelocity, lib.cpBodyGetAngle
 
 
-def _touching(space: pymunk.Space, shape: pymunk.Shape) -> bool:
-    """Whether ``shape`` overlaps another non-sensor shape: chipmunk's shape query without a callback, so
-    pymunk builds no result list and makes no Python call per hit. The world has no sensor shapes, so this is
-    ``bool(space.shape_query(shape))`` at a fraction of its cost, and most ticks the robot touches nothing."""
-    return bool(lib.cpSpaceShapeQuery(space._space, shape._shape, ffi.NULL, ffi.NULL))
+def _touching(space: object, shape: object) -> bool:
+    """Whether the shape of chipmunk handle ``shape`` overlaps another non-sensor shape of the space of handle
+    ``space``: chipmunk's shape query without a callback, so pymunk builds no result list and makes no Python
+    call per hit. The world has no sensor shapes, so this is ``bool(space.shape_query(shape))`` at a fraction of
+    its cost, and most ticks the robot touches nothing."""
+    return bool(lib.cpSpaceShapeQuery(space, shape, ffi.NULL, ffi.NULL))
 
 
 def normal_draws(rng: np.random.Generator, block: int = 1024) -> Iterator[float]:
@@ -75,6 +75,10 @@ class Robot:
         self.shape.friction = 0.3
         world.space.add(self.body, self.shape)
         self.space = world.space
+        # chipmunk's handles of the body, its shape and the space, for the calls of every physics step
+        self._body, self._shape, self._space = self.body._body, self.shape._shape, self.space._space
+        # only a model with limits of its own pays a call for them each step
+        self._limited = type(self).limits is not Robot.limits
         self.cmd_speed = 0.0
         self.cmd_yaw_rate = 0.0
         self.speed = 0.0  # commanded-after-limits forward speed
@@ -93,13 +97,16 @@ class Robot:
         return speed, yaw_rate
 
     def before_step(self, dt: float) -> None:
-        speed, yaw_rate = self.limits(self.cmd_speed, self.cmd_yaw_rate)
-        self.speed = _approach(self.speed, speed, self.max_accel * dt)
-        self.yaw_rate = _approach(self.yaw_rate, yaw_rate, self.max_yaw_accel * dt)
+        if self._limited:
+            speed, yaw_rate = self.limits(self.cmd_speed, self.cmd_yaw_rate)
+        else:
+            speed, yaw_rate = self.cmd_speed, self.cmd_yaw_rate
+        speed = self.speed = _approach(self.speed, speed, self.max_accel * dt)
+        yaw_rate = self.yaw_rate = _approach(self.yaw_rate, yaw_rate, self.max_yaw_accel * dt)
         a = self._pose[2]
-        vx, vy = self.speed * math.cos(a), self.speed * math.sin(a)
+        vx, vy = speed * math.cos(a), speed * math.sin(a)
         # a velocity-controlled base pushes against a wall but cannot drive into it: drop the inward component
-        if _touching(self.space, self.shape):
+        if _touching(self._space, self._shape):
             for hit in self.space.shape_query(self.shape):
                 if hit.shape is None or hit.shape.body is self.body:
                     continue
@@ -107,18 +114,18 @@ class Robot:
                 into = vx * n.x + vy * n.y
                 if into > 0:
                     vx, vy = vx - into * n.x, vy - into * n.y
-        _SET_VELOCITY(self.body, (vx, vy))
-        _SET_ANGULAR_VELOCITY(self.body, self.yaw_rate)
+        _SET_VELOCITY(self._body, (vx, vy))
+        _SET_ANGULAR_VELOCITY(self._body, yaw_rate)
 
     def after_step(self, dt: float) -> None:
-        body = self.body._body
+        body = self._body
         p, v, a = _GET_POSITION(body), _GET_VELOCITY(body), _GET_ANGLE(body)
         x, y, vx, vy = p.x, p.y, v.x, v.y
         self._pose = (x, y, a)
         speed = vx * math.cos(a) + vy * math.sin(a)
         self.accel = (speed - self.true_speed) / dt
         self.true_speed = speed
-        self.odometer += abs(self.true_speed) * dt
+        self.odometer += abs(speed) * dt
 
     @property
     def pose(self) -> tuple[float, float, float]:

@@ -6,12 +6,10 @@ it over pymunk. The vehicle loop sees nothing else of the robot.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 
-@dataclass(frozen=True)
-class Fix:
+class Fix(NamedTuple):
     """A position fix in the local frame (x north, y east), with its 1-sigma error."""
 
     x: float
@@ -19,9 +17,10 @@ class Fix:
     std: float
 
 
-@dataclass(frozen=True)
-class Readings:
-    """One control tick's sensor data."""
+class Readings(NamedTuple):
+    """One control tick's sensor data. A named tuple rather than a frozen dataclass: a driver builds one every
+    20 ms tick, and a tuple is built at a third of the cost (a frozen dataclass sets each of its seven fields
+    through ``object.__setattr__``), with the same names and immutability."""
 
     t: float
     speed: float  # odometry forward speed, m/s
