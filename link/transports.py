@@ -108,6 +108,15 @@ class LockstepBus:
             q = self._queues[dst] = []
         heapq.heappush(q, (at, self._seq, src, data))
 
+    def inbox(self, dst: str) -> list[tuple[float, int, str, bytes]]:
+        """The live queue of ``dst``, a heap whose head ``[0][0]`` is the earliest arrival time: a lockstep loop
+        looks at it to skip ``receive`` on the many ticks nothing is due. Read it only; ``send`` and ``receive``
+        change it."""
+        q = self._queues.get(dst)
+        if q is None:
+            q = self._queues[dst] = []
+        return q
+
     def receive(self, dst: str, now: float) -> list[tuple[bytes, str]]:
         """Every packet for ``dst`` due by ``now``, in time order, equal times in send order."""
         q = self._queues.get(dst)

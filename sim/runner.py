@@ -46,6 +46,9 @@ _TLOG_STAMP = struct.Struct(">Q").pack
 # every tick gave (for DT = 1/50 s the sum strays from k / 50 by far less than 1e-9 for days of ticks), at the
 # cost of a division instead of a ``round``
 TICK_RATE = round(1 / DT)
+# the enum member ``_record`` compares with every tick, looked up once (an Enum class attribute costs a lookup
+# through its metaclass each time)
+_RETURN_SERVICE = Holder.RETURN_SERVICE
 
 
 @dataclass
@@ -62,6 +65,8 @@ class StationSim:
     # the two directions of its radio link, named once: (source, destination) lane and fate stream
     down: tuple[tuple[str, str], str] = field(init=False)
     up: tuple[tuple[str, str], str] = field(init=False)
+    # its live queue on the lockstep bus (``LockstepBus.inbox``): the tick looks at its head before receiving
+    inbox: list = field(init=False, default_factory=list, repr=False)
 
     def __post_init__(self) -> None:
         self.down = (("vehicle", self.name), f"downlink.{self.name}")
@@ -156,6 +161,9 @@ class Run:
             gs = GroundStation(s.sysid, 190)
             self.stations[s.name] = StationSim(s.name, gs, (s.x, s.y), s.power_dbm, s.name == sc.operator_station)
         self._station_list = list(self.stations.values())  # the tick walks it four times
+        self._inbox = self.bus.inbox("vehicle")
+        for st in self._station_list:
+            st.inbox = self.bus.inbox(st.name)
         self._operator = op = self.stations[sc.operator_station]
         op.operator = Operator(op.gs, sc.route, sc.resume_route, from_plan_items(sc.plan), sc.teleop,
                                    attempts=sc.attempts)
@@ -215,13 +223,19 @@ class Run:
 
     def step(self) -> None:
         """One tick. Work nothing waits for is skipped (an empty queue, a dead station, a timed event not due
-        yet), never reordered: the radio draws each packet's fate in the same order as ever."""
+        yet), never reordered: the radio draws each packet's fate in the same order as ever. A queue is received
+        from only when its head is due (most ticks nothing is: a call saved)."""
         self.ticks += 1
         self.t = t = self.ticks / TICK_RATE
         v, ep, bus, stations = self.vehicle, self.endpoint, self.bus, self._station_list
-        for data, _src in bus.receive("vehicle", t):
-            ep.receive(data, t)
+        inbox = self._inbox
+        if inbox and inbox[0][0] <= t:
+            for data, _src in bus.receive("vehicle", t):
+                ep.receive(data, t)
         for st in stations:
+            inbox = st.inbox
+            if not inbox or inbox[0][0] > t:
+                continue
             for data, _src in bus.receive(st.name, t):
                 if st.alive:
                     st.gs.feed(data, t)
@@ -335,22 +349,24 @@ class Run:
         p = v.estimator.pose
         cur = v.book.current
         if cur is None:
-            holder, index = 0, -1
+            holder, index, returning = 0, -1, False
         else:
-            holder, index = int(cur.holder), cur.index
-        state = self._operator.state
+            h = cur.holder
+            holder, index, returning = int(h), cur.index, h is _RETURN_SERVICE
+        op = self._operator
+        state = op.state
         if state is None:
             link, rssi = 0.0, math.nan
         else:
-            link = 0.0 if self.jams and self._jammed(self._operator.name, t) else state.delivery
+            link = 0.0 if self.jams and self._jammed(op.name, t) else state.delivery
             rssi = state.rssi_dbm
         speed, yaw_rate = v.command_out
         tr.rows.append((t, pos[0], pos[1], p.x, p.y, holder, index, v.state(), link, rssi, v.link_is_good, speed,
                         yaw_rate))
         if v.setpoint is not None:
             self._audit(v)
-        returning = cur is not None and cur.holder is Holder.RETURN_SERVICE
-        blk = self.blocks[-1] if self.blocks and self.blocks[-1].ended is None else None
+        blocks = self.blocks
+        blk = blocks[-1] if blocks and blocks[-1].ended is None else None
         if blk is not None and (not returning or cur.index != blk.index):
             self._close_block()
             blk = None

@@ -55,6 +55,21 @@ def test_lockstep_delivers_in_time_order_per_destination():
     assert bus.pending() == 0
 
 
+def test_an_inbox_head_says_exactly_when_receive_has_something():
+    """The lockstep loop skips ``receive`` while the inbox's head is not due: that must be exactly when receive
+    would return nothing, for every time around each arrival."""
+    bus = LockstepBus()
+    inbox = bus.inbox("vehicle")
+    assert inbox == [] and bus.inbox("vehicle") is inbox
+    for at in (0.06, 0.02, 0.04, 0.04):
+        bus.send("gcs", "vehicle", b"%.2f" % at, at)
+    for now in (0.0, 0.019, 0.02, 0.03, 0.04, 0.05, 0.059, 0.06, 0.07):
+        due = bool(inbox) and inbox[0][0] <= now
+        got = bus.receive("vehicle", now)
+        assert due == bool(got), now
+    assert inbox == [] and bus.pending() == 0
+
+
 def test_strangers_cycling_ports_never_evict_a_pinned_peer():
     """17+ source ports would push a 16-entry table's oldest peer out; the owner's address is pinned."""
     owner = UdpTransport(("127.0.0.1", 0))
