@@ -49,6 +49,20 @@ class RadioParams:
     reorder: bool = False  # let per-packet jitter reorder packets (a routed network); off: first in, first out
 
 
+class _FateStream:
+    """One link direction's packet fates: its keyed hash before any packet (keying BLAKE2b costs a whole
+    compression of the key block, so each packet copies this state instead of keying a fresh one: the digest is
+    the same), and the send time (µs) and rank of its last packet. One record, so a packet looks its direction up
+    once."""
+
+    __slots__ = ("hash", "us", "rank")
+
+    def __init__(self, key: bytes) -> None:
+        self.hash = hashlib.blake2b(digest_size=24, key=key)
+        self.us: int | None = None
+        self.rank = 0
+
+
 @dataclass(frozen=True)
 class LinkState:
     rssi_dbm: float
@@ -80,13 +94,12 @@ class Radio:
         self.seed = seed
         self.rng = subsystem_rng(seed, "radio.packets")  # the stream of callers that name none
         self._streams: dict[str, bytes] = {}  # the fate key of each link direction
-        self._hashers: dict[str, hashlib.blake2b] = {}  # each direction's hash, keyed, before any packet
-        self._rank: dict[str, tuple[int, int]] = {}  # (time in µs, rank) of each direction's last packet
+        self._fates: dict[str, _FateStream] = {}  # each direction's keyed hash and last packet
         # the shadowing field is a function of place, seeded once from its own stream
         self._field_seed = int(subsystem_seed(seed, "radio.shadowing").generate_state(1)[0])
         self._cells: dict[tuple[int, int], float] = {}
         self._corners: dict[tuple[int, int], tuple[float, float, float, float]] = {}  # a grid square's 4 cells
-        self._last: dict[tuple, tuple[tuple[float, float], LinkState]] = {}
+        self._last: dict[tuple, tuple[float, float, LinkState]] = {}  # per antenna: where it was last worked out
         self._lane_last: dict[object, float] = {}  # per direction: when its last packet arrives
         self.sent = 0
         self.lost = 0
@@ -125,10 +138,14 @@ class Radio:
         creeping does not repeat the wall queries every tick."""
         key = (antenna, power_dbm)
         hit = self._last.get(key)
-        if hit is not None and abs(hit[0][0] - robot[0]) < MOTION_GRAIN and abs(hit[0][1] - robot[1]) < MOTION_GRAIN:
-            return hit[1]
+        x, y = robot[0], robot[1]
+        if hit is not None:
+            hx, hy, state = hit
+            # (``abs(hx - x) < MOTION_GRAIN`` as a chained comparison: the same test, without a call)
+            if -MOTION_GRAIN < hx - x < MOTION_GRAIN and -MOTION_GRAIN < hy - y < MOTION_GRAIN:
+                return state
         state = self._link(antenna, power_dbm, robot)
-        self._last[key] = ((robot[0], robot[1]), state)
+        self._last[key] = (x, y, state)
         return state
 
     def _link(self, antenna: tuple[float, float], power_dbm: float, robot: tuple[float, float]) -> LinkState:
@@ -147,25 +164,21 @@ class Radio:
             key = self._streams[name] = words.tobytes()
         return key
 
-    def _fate_hash(self, name: str) -> hashlib.blake2b:
-        """The keyed hash of stream ``name`` before any packet: keying BLAKE2b costs a whole compression of the
-        key block, so each packet copies this state instead of keying a fresh one (the digest is the same)."""
-        h = self._hashers.get(name)
-        if h is None:
-            h = self._hashers[name] = hashlib.blake2b(digest_size=24, key=self._fate_key(name))
-        return h
-
     def _uniforms(self, name: str, t: float) -> tuple[float, float, float]:
         """Three uniforms in (0, 1) for the next packet of stream ``name`` sent at time ``t``: a hash of the
         stream's key, the time (µs) and the packet's rank among that stream's packets at that time. A packet's
         fate depends on nothing sent before it, so two runs that differ only in extra traffic (a longer return
         plan, a baseline's telemetry after the loss) still see the same fates for the packets they share."""
-        us = int(round(t * 1e6))
-        last, rank = self._rank.get(name, (None, 0))
-        rank = rank + 1 if last == us else 0
-        self._rank[name] = (us, rank)
-        h = self._fate_hash(name).copy()
-        h.update(_US_RANK(us, rank))
+        us = round(t * 1e6)  # (an int: ``round`` of a float with no digits)
+        f = self._fates.get(name)
+        if f is None:
+            f = self._fates[name] = _FateStream(self._fate_key(name))
+        if f.us == us:
+            f.rank += 1
+        else:
+            f.us, f.rank = us, 0
+        h = f.hash.copy()
+        h.update(_US_RANK(us, f.rank))
         a, b, c = _THREE_WORDS(h.digest())
         return (a + 0.5) / 2.0**64, (b + 0.5) / 2.0**64, (c + 0.5) / 2.0**64
 
@@ -198,6 +211,8 @@ class Radio:
             return None
         at = t + latency
         if not self.p.reorder:
-            at = max(at, self._lane_last.get(lane, at))
+            last = self._lane_last.get(lane)
+            if last is not None and last > at:  # behind the lane's last packet: ``max(at, last)``
+                at = last
             self._lane_last[lane] = at
         return at
