@@ -21,6 +21,9 @@ from link.mission import Item
 
 STALE_TELEMETRY = 1.0  # s: an operator stops pushing the stick when the picture freezes
 WAYPOINT_RADIUS = 1.5  # m
+# what ``step`` compares the vehicle's status with every tick, looked up in the dialect once
+_AWAITING_CLAIM, _TELEOP = mav.RETURNLINK_STATE_AWAITING_CLAIM, mav.RETURNLINK_STATE_TELEOP
+_RETURNING, _COMMS_LOST = mav.RETURNLINK_STATE_RETURNING, mav.LEASE_EXPIRE_REASON_COMMS_LOST
 
 
 @dataclass
@@ -90,7 +93,7 @@ class Operator:
             return
         if st is None:
             return
-        if st.state == mav.RETURNLINK_STATE_AWAITING_CLAIM and st.owner == gs.sysid and fresh:
+        if st.state == _AWAITING_CLAIM and st.owner == gs.sysid and fresh:
             if self.cut_off is not None:  # the link died on the way there: the vehicle came back without it
                 self.losses[self.cut_off] = self.losses.get(self.cut_off, 0) + 1
                 self.cut_off = None
@@ -105,12 +108,12 @@ class Operator:
             self.cut_off = self.heading_to or self.cut_off  # the latest sign of a loss names the place
             gs.stop_streaming()  # the picture froze: stop pushing the stick
             return
-        if st.state != mav.RETURNLINK_STATE_TELEOP or st.owner != gs.sysid:
-            if st.state == mav.RETURNLINK_STATE_RETURNING and st.last_reason == mav.LEASE_EXPIRE_REASON_COMMS_LOST:
+        if st.state != _TELEOP or st.owner != gs.sysid:
+            if st.state == _RETURNING and st.last_reason == _COMMS_LOST:
                 self.cut_off = self.heading_to or self.cut_off  # the vehicle lost us and is coming back
             gs.stop()
             return
-        if self.phase == "driving" and self.leg.done and self.claims:
+        if self.phase == "driving" and self.claims and self.leg.done:
             self.phase = "resuming"
         leg = self.resume if self.phase == "resuming" else self.leg
         if leg.done:
@@ -123,13 +126,15 @@ class Operator:
         if v.position is None:
             return
         x, y, speed = leg.points[leg.index]
-        if self.losses.get((x, y), 0) >= self.attempts:  # lost the link on the way there often enough: give it up
+        place = (x, y)
+        # lost the link on the way there often enough: give it up (no loss yet on most ticks: no lookup)
+        if self.losses and self.losses.get(place, 0) >= self.attempts:
             leg.index += 1
             self.heading_to = None
             if leg.done:
                 gs.stop()
             return
-        self.heading_to = (x, y)
+        self.heading_to = place
         dn, de = x - v.position[0], y - v.position[1]
         d = math.hypot(dn, de)
         if d < WAYPOINT_RADIUS:
