@@ -87,6 +87,9 @@ class Robot:
         self.true_speed = 0.0
         self.accel = 0.0  # true forward acceleration of the body (what an accelerometer feels), m/s^2
         self._pose = (float(x), float(y), float(self.body.angle))  # as of the last physics step
+        # the cosine and sine of that pose's yaw: ``after_step`` needs them for the body's forward speed and the
+        # next ``before_step`` for the commanded velocity, of the very same angle, so they are worked out once
+        self._cos, self._sin = math.cos(self._pose[2]), math.sin(self._pose[2])
 
     def command(self, speed: float, yaw_rate: float) -> None:
         self.cmd_speed = _clamp(speed, -self.max_speed, self.max_speed)
@@ -103,8 +106,7 @@ class Robot:
             speed, yaw_rate = self.cmd_speed, self.cmd_yaw_rate
         speed = self.speed = _approach(self.speed, speed, self.max_accel * dt)
         yaw_rate = self.yaw_rate = _approach(self.yaw_rate, yaw_rate, self.max_yaw_accel * dt)
-        a = self._pose[2]
-        vx, vy = speed * math.cos(a), speed * math.sin(a)
+        vx, vy = speed * self._cos, speed * self._sin
         # a velocity-controlled base pushes against a wall but cannot drive into it: drop the inward component
         if _touching(self._space, self._shape):
             for hit in self.space.shape_query(self.shape):
@@ -122,7 +124,9 @@ class Robot:
         p, v, a = _GET_POSITION(body), _GET_VELOCITY(body), _GET_ANGLE(body)
         x, y, vx, vy = p.x, p.y, v.x, v.y
         self._pose = (x, y, a)
-        speed = vx * math.cos(a) + vy * math.sin(a)
+        c = self._cos = math.cos(a)
+        s = self._sin = math.sin(a)
+        speed = vx * c + vy * s
         self.accel = (speed - self.true_speed) / dt
         self.true_speed = speed
         self.odometer += abs(speed) * dt
