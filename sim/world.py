@@ -45,11 +45,27 @@ def point_in_polygon(x: float, y: float, poly: tuple[tuple[float, float], ...]) 
     return inside
 
 
+def _edges(poly: tuple[tuple[float, float], ...]) -> tuple[tuple[float, float, float, float], ...]:
+    """The polygon's edges (x1, y1, x2, y2) in ``point_in_polygon``'s order, closing edge last."""
+    n = len(poly)
+    return tuple((*poly[i], *poly[(i + 1) % n]) for i in range(n))
+
+
+def _inside(x: float, y: float, edges: tuple[tuple[float, float, float, float], ...]) -> bool:
+    """``point_in_polygon`` over edges worked out beforehand: the same crossing test, in the same order."""
+    inside = False
+    for x1, y1, x2, y2 in edges:
+        if (y1 > y) != (y2 > y) and x < (x2 - x1) * (y - y1) / (y2 - y1) + x1:
+            inside = not inside
+    return inside
+
+
 class World:
     def __init__(self, walls: tuple[Wall, ...], denied: tuple[tuple[tuple[float, float], ...], ...] = (),
                  stations: tuple[Station, ...] = ()) -> None:
         self.walls = walls
         self.denied = denied
+        self._denied_edges = tuple(_edges(poly) for poly in denied)  # the sensors ask at every fix time
         self.stations = stations
         self.space = pymunk.Space()
         self.space.iterations = 10
@@ -74,7 +90,10 @@ class World:
         self._touching = max(0, self._touching - 1)
 
     def gps_denied(self, x: float, y: float) -> bool:
-        return any(point_in_polygon(x, y, poly) for poly in self.denied)
+        for edges in self._denied_edges:
+            if _inside(x, y, edges):
+                return True
+        return False
 
     def attenuation_db(self, a: tuple[float, float], b: tuple[float, float]) -> float:
         """Total wall loss along the straight line a -> b (each wall segment crossed counts once)."""

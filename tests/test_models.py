@@ -66,6 +66,21 @@ def test_the_pose_is_where_the_body_is_after_every_step(kind):
     assert world.collisions >= 1
 
 
+def test_gps_denied_is_point_in_polygon_over_every_zone():
+    """The world tests its denied zones over edges worked out once: the same answer as the polygon test, on and
+    around the vertices and edges too."""
+    from sim.world import point_in_polygon
+
+    zones = (((3.0, -3.0), (42.0, -3.0), (62.0, 16.0), (56.0, 22.0), (38.0, 3.0), (3.0, 3.0)),
+             ((-10.0, -10.0), (-4.0, -10.0), (-4.0, -4.0)))
+    world = World((), zones)
+    points = [(x * 0.5, y * 0.5) for x in range(-30, 130) for y in range(-30, 50)]
+    points += [p for zone in zones for p in zone]
+    got = [world.gps_denied(x, y) for x, y in points]
+    assert got == [any(point_in_polygon(x, y, z) for z in zones) for x, y in points]
+    assert 100 < sum(got) < len(points)
+
+
 def test_legged_speed_is_bounded_by_stride_and_step_frequency():
     world = World(())
     robot = Legged(world, 0.0, 0.0, 0.0, np.random.default_rng(0))
