@@ -86,10 +86,13 @@ class Robot:
         self.odometer = 0.0
         self.true_speed = 0.0
         self.accel = 0.0  # true forward acceleration of the body (what an accelerometer feels), m/s^2
-        self._pose = (float(x), float(y), float(self.body.angle))  # as of the last physics step
+        # true (x, y, yaw) as of the last ``after_step``, for scoring: only a physics step moves the body, and the
+        # sensors, the runner and the gait read it several times a tick, so it is kept rather than asked of pymunk
+        # (and a plain attribute, not a property: set by the physics step alone)
+        self.pose = (float(x), float(y), float(self.body.angle))
         # the cosine and sine of that pose's yaw: ``after_step`` needs them for the body's forward speed and the
         # next ``before_step`` for the commanded velocity, of the very same angle, so they are worked out once
-        self._cos, self._sin = math.cos(self._pose[2]), math.sin(self._pose[2])
+        self._cos, self._sin = math.cos(self.pose[2]), math.sin(self.pose[2])
 
     def command(self, speed: float, yaw_rate: float) -> None:
         self.cmd_speed = _clamp(speed, -self.max_speed, self.max_speed)
@@ -123,19 +126,13 @@ class Robot:
         body = self._body
         p, v, a = _GET_POSITION(body), _GET_VELOCITY(body), _GET_ANGLE(body)
         x, y, vx, vy = p.x, p.y, v.x, v.y
-        self._pose = (x, y, a)
+        self.pose = (x, y, a)
         c = self._cos = math.cos(a)
         s = self._sin = math.sin(a)
         speed = vx * c + vy * s
         self.accel = (speed - self.true_speed) / dt
         self.true_speed = speed
         self.odometer += abs(speed) * dt
-
-    @property
-    def pose(self) -> tuple[float, float, float]:
-        """True (x, y, yaw) as of the last ``after_step``: only a physics step moves the body, and the sensors,
-        the runner and the gait all read it several times a tick."""
-        return self._pose
 
     def odometry_speed(self, dt: float) -> float:
         raise NotImplementedError
