@@ -25,12 +25,7 @@ _SET_VELOCITY, _SET_ANGULAR_VELOCITY = lib.cpBodySetVelocity, lib.cpBodySetAngul
 _GET_POSITION, _GET_VELOCITY, _GET_ANGLE = lib.cpBodyGetPosition, lib.cpBodyGetVelocity, lib.cpBodyGetAngle
 
 
-def _touching(space: object, shape: object) -> bool:
-    """Whether the shape of chipmunk handle ``shape`` overlaps another non-sensor shape of the space of handle
-    ``space``: chipmunk's shape query without a callback, so pymunk builds no result list and makes no Python
-    call per hit. The world has no sensor shapes, so this is ``bool(space.shape_query(shape))`` at a fraction of
-    its cost, and most ticks the robot touches nothing."""
-    return bool(lib.cpSpaceShapeQuery(space, shape, ffi.NULL, ffi.NULL))
+_NULL = ffi.NULL
 
 
 def normal_draws(rng: np.random.Generator, block: int = 1024) -> Iterator[float]:
@@ -95,8 +90,14 @@ class Robot:
         self._cos, self._sin = math.cos(self.pose[2]), math.sin(self.pose[2])
 
     def command(self, speed: float, yaw_rate: float) -> None:
-        self.cmd_speed = _clamp(speed, -self.max_speed, self.max_speed)
-        self.cmd_yaw_rate = _clamp(yaw_rate, -self.max_yaw_rate, self.max_yaw_rate)
+        # ``_clamp(speed, -max_speed, max_speed)`` and the same for the rate, written out: the vehicle commands
+        # every tick, and a helper's call costs more than its two comparisons
+        hi = self.max_speed
+        speed = speed if speed < hi else hi
+        self.cmd_speed = speed if speed > -hi else -hi
+        hi = self.max_yaw_rate
+        yaw_rate = yaw_rate if yaw_rate < hi else hi
+        self.cmd_yaw_rate = yaw_rate if yaw_rate > -hi else -hi
 
     def limits(self, speed: float, yaw_rate: float) -> tuple[float, float]:
         """Extra model-specific limits (the quadruped's stride and step frequency)."""
@@ -107,11 +108,22 @@ class Robot:
             speed, yaw_rate = self.limits(self.cmd_speed, self.cmd_yaw_rate)
         else:
             speed, yaw_rate = self.cmd_speed, self.cmd_yaw_rate
-        speed = self.speed = _approach(self.speed, speed, self.max_accel * dt)
-        yaw_rate = self.yaw_rate = _approach(self.yaw_rate, yaw_rate, self.max_yaw_accel * dt)
+        # ``_approach`` of the speed and of the rate toward the command, written out (the same operations in the
+        # same order): the physics step runs every tick, and a helper's call costs more than its arithmetic
+        current, step = self.speed, self.max_accel * dt
+        d = speed - current
+        d = d if d < step else step
+        speed = self.speed = current + (d if d > -step else -step)
+        current, step = self.yaw_rate, self.max_yaw_accel * dt
+        d = yaw_rate - current
+        d = d if d < step else step
+        yaw_rate = self.yaw_rate = current + (d if d > -step else -step)
         vx, vy = speed * self._cos, speed * self._sin
-        # a velocity-controlled base pushes against a wall but cannot drive into it: drop the inward component
-        if _touching(self._space, self._shape):
+        # a velocity-controlled base pushes against a wall but cannot drive into it: drop the inward component.
+        # Whether it touches anything is chipmunk's shape query without a callback, so pymunk builds no result
+        # list and makes no Python call per hit: ``bool(space.shape_query(shape))`` (the world has no sensor
+        # shapes) at a fraction of its cost, and most ticks the robot touches nothing
+        if lib.cpSpaceShapeQuery(self._space, self._shape, _NULL, _NULL):
             for hit in self.space.shape_query(self.shape):
                 if hit.shape is None or hit.shape.body is self.body:
                     continue

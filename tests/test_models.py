@@ -66,6 +66,32 @@ def test_the_pose_is_where_the_body_is_after_every_step(kind):
     assert world.collisions >= 1
 
 
+@pytest.mark.parametrize("kind", ["rover", "legged"])
+def test_command_and_step_limits_are_clamp_and_approach(kind):
+    """``command`` and ``before_step`` write out ``_clamp`` and ``_approach`` for speed: they must give the very
+    same floats, over commands beyond the limits both ways, small steps and reversals."""
+    from sim.robots import _approach, _clamp
+
+    def bits(*values: float) -> list[str]:  # every bit, the sign of a zero too
+        return [v.hex() for v in values]
+
+    world = World(())
+    robot = make_robot(kind, world, 0.0, 0.0, 0.0, np.random.default_rng(0))
+    rng = np.random.default_rng(3)
+    for k in range(400):
+        cmd = (float(rng.normal(0.0, 3.0)), float(rng.normal(0.0, 2.5))) if k % 7 else (0.0, -0.0)
+        robot.command(*cmd)
+        assert bits(robot.cmd_speed, robot.cmd_yaw_rate) == bits(
+            _clamp(cmd[0], -robot.max_speed, robot.max_speed), _clamp(cmd[1], -robot.max_yaw_rate, robot.max_yaw_rate))
+        speed, yaw_rate = robot.speed, robot.yaw_rate
+        target = robot.limits(robot.cmd_speed, robot.cmd_yaw_rate)
+        robot.before_step(0.02)
+        assert bits(robot.speed, robot.yaw_rate) == bits(_approach(speed, target[0], robot.max_accel * 0.02),
+                                                         _approach(yaw_rate, target[1], robot.max_yaw_accel * 0.02))
+        world.step(0.02)
+        robot.after_step(0.02)
+
+
 def test_gps_denied_is_point_in_polygon_over_every_zone():
     """The world tests its denied zones over edges worked out once: the same answer as the polygon test, on and
     around the vertices and edges too."""
