@@ -199,7 +199,8 @@ class Radio:
             return None
         if jitter is None:
             jitter = math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
-        return max(0.0, self.p.latency_ms + self.p.jitter_ms * jitter) / 1000.0
+        ms = self.p.latency_ms + self.p.jitter_ms * jitter
+        return (ms if ms > 0.0 else 0.0) / 1000.0  # ``max(0.0, ms)`` (the same for every float), without a call
 
     def arrival(self, state: LinkState, t: float, lane: object, stream: str | None = None) -> float | None:
         """When a packet sent at ``t`` one way (``lane``, e.g. (source, destination)) arrives, or None if lost;
