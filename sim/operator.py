@@ -127,8 +127,7 @@ class Operator:
             return
         x, y, speed = leg.points[leg.index]
         place = (x, y)
-        # lost the link on the way there often enough: give it up (no loss yet on most ticks: no lookup)
-        if self.losses and self.losses.get(place, 0) >= self.attempts:
+        if self.losses.get(place, 0) >= self.attempts:  # lost the link on the way there often enough: give it up
             leg.index += 1
             self.heading_to = None
             if leg.done:
