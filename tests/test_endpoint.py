@@ -302,3 +302,30 @@ def test_a_lease_change_is_reported_in_the_tick_it_happens():
     pair.step(0.06)  # three quiet ticks: nothing changed, no slot due
     quiet = [pair.endpoint.parser.parse_buffer(f)[0].get_type() for f in pair.heard]
     assert "LEASE_STATUS" not in quiet and "CONTROL_STATUS" not in quiet
+
+
+def test_every_handler_is_routed_and_targets_are_checked_from_the_table():
+    """``Endpoint.handle`` takes each type's handler and target fields from ``ROUTES``, not from probing the
+    message: every ``_on_`` method must be reachable, and the table must judge targets as the fields say."""
+    from vehicle.mavlink import ROUTES, Endpoint
+
+    assert {r.handler for r in ROUTES.values() if r.handler} == {n for n in dir(Endpoint) if n.startswith("_on_")}
+    pair = Pair()
+    pair.connect()
+    enc = mav.MAVLink(None, 255, 190)
+    c = pair.endpoint.counters
+
+    def velocity(ts: int, tc: int) -> bytes:
+        return mav.MAVLink_set_position_target_local_ned_message(
+            0, ts, tc, mav.MAV_FRAME_BODY_NED, 0b0000_1101_1100_0111, 0, 0, 0, 1.0, 0, 0, 0, 0, 0, 0, 0).pack(enc)
+
+    for ts, tc, wrong in ((1, 1, 0), (0, 0, 0), (1, 0, 0), (1, 5, 1), (7, 1, 1), (0, 5, 1)):
+        before = (c.wrong_target, c.frames)
+        pair.endpoint.receive(velocity(ts, tc), pair.t)
+        assert (c.wrong_target - before[0], c.frames - before[1]) == (wrong, 1), (ts, tc)
+    before = c.wrong_target
+    pair.endpoint.receive(mav.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(enc), pair.t)  # no target fields
+    pair.endpoint.receive(mav.MAVLink_manual_control_message(1, 0, 0, 500, 0, 0).pack(enc), pair.t)
+    assert c.wrong_target == before
+    pair.endpoint.receive(mav.MAVLink_manual_control_message(7, 0, 0, 500, 0, 0).pack(enc), pair.t)
+    assert c.wrong_target == before + 1  # its own ``target`` field, checked by its handler

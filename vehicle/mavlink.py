@@ -15,6 +15,7 @@ from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
+from typing import NamedTuple
 
 from link import dialect
 from link.codec import read_frames
@@ -62,6 +63,15 @@ class Access(Enum):
     READ = "read"  # asks for information: answered to anyone, signed or not
     ACT = "act"  # changes vehicle state: with a key installed, only from frames signed with it
     KEY = "key"  # SETUP_SIGNING: judges its own signature and always answers why
+
+
+class Route(NamedTuple):
+    """How ``Endpoint.handle`` treats one message type, worked out once per type rather than per frame."""
+
+    handler: str | None  # the Endpoint method's name (looked up on the instance per frame), None: not handled
+    target_system: bool  # the message has a target_system field to check
+    target_component: bool  # ... and a target_component field
+    any_component: bool  # (MANUAL_CONTROL: addressed to the system whatever the component)
 
 
 class _Sink:
@@ -211,14 +221,23 @@ class Endpoint:
             self._source = None  # frames handled later without a source are not attributed to this one
 
     def handle(self, m, t: float) -> None:
-        if m.get_type() == "BAD_DATA":
+        """One message: counted, target-checked, signature-judged, then handed to its ``_on_`` method.
+
+        Written for the teleop stream (10 Hz from every station): the type is asked once, the header read once,
+        the target fields and the handler's name come from a table per message type (``ROUTES``) instead of
+        attribute probes and a name built per frame. The handler itself is still looked up on the instance, so
+        replacing a method (as a test does) takes effect."""
+        kind = m.get_type()
+        if kind == "BAD_DATA":
             self.counters.bad_frames += 1
             return
-        sender, scomp = m.get_srcSystem(), m.get_srcComponent()
+        header = m.get_header()
+        sender = header.srcSystem
         if sender == self.sysid or sender == 0:
             return  # our own frames echoed back, or an anonymous sender
         self.counters.frames += 1
-        if not self._for_us(m):
+        route = ROUTES.get(kind, NO_ROUTE)
+        if not self._for_us(m, route):
             self.counters.wrong_target += 1
             return
         self.trusted = True
@@ -229,23 +248,23 @@ class Endpoint:
                 self._refuse(m, verdict, sender, t)
                 return
         if self.trusted:  # an unsigned frame never counts as the owner heard: forged heartbeats keep nothing alive
-            self.vehicle.heard(sender, t, m.get_seq())
+            self.vehicle.heard(sender, t, header.seq)
             if self._source is not None:  # only a trusted frame may move a sender's address (at most 255 senders)
                 self.sources[sender] = self._source
                 if self.key is not None:
                     self.signed.add(sender)
-        handler = getattr(self, f"_on_{m.get_type().lower()}", None)
-        if handler is None:
+        if route.handler is None:
             return
+        handler = getattr(self, route.handler)
         try:
-            handler(m, sender, scomp, t)
+            handler(m, sender, header.srcComponent, t)
         except (ValueError, TypeError, OverflowError, KeyError) as e:
             # a well-framed message with absurd content: refuse it, keep running, keep state
             self.counters.bad_frames += 1
-            self.statustext(f"ignored {m.get_type()}: {e}", mav.MAV_SEVERITY_WARNING)
+            self.statustext(f"ignored {kind}: {e}", mav.MAV_SEVERITY_WARNING)
         except Exception as e:  # noqa: BLE001 - a fault in one handler must never take the vehicle down
             self.counters.handler_faults += 1
-            self.statustext(f"fault handling {m.get_type()}: {type(e).__name__}: {e}", mav.MAV_SEVERITY_ERROR)
+            self.statustext(f"fault handling {kind}: {type(e).__name__}: {e}", mav.MAV_SEVERITY_ERROR)
 
     def pinned(self) -> list[Hashable]:
         """Addresses the transport must never drop from its peer table: the owner's and, with a key installed,
@@ -255,12 +274,15 @@ class Endpoint:
             keep.add(self.vehicle.book.owner)
         return [self.sources[s] for s in keep if s in self.sources]
 
-    def _for_us(self, m) -> bool:
-        ts = getattr(m, "target_system", None)
-        if ts is not None and ts not in (0, self.sysid):
-            return False
-        tc = getattr(m, "target_component", None)
-        return tc is None or tc in (0, self.compid) or m.get_type() == "MANUAL_CONTROL"
+    def _for_us(self, m, route: Route) -> bool:
+        if route.target_system:
+            ts = m.target_system
+            if ts != 0 and ts != self.sysid:
+                return False
+        if route.target_component:
+            tc = m.target_component
+            return tc == 0 or tc == self.compid or route.any_component
+        return True
 
     # ----- commands ------------------------------------------------------------------------------------------
     def _on_command_long(self, m, sender: int, scomp: int, t: float) -> None:
@@ -681,6 +703,17 @@ COMMANDS: dict[int, Callable[..., tuple[int, int]]] = {
     mav.MAV_CMD_LEASE_EXPIRE: Endpoint._cmd_lease_expire,
     mav.MAV_CMD_DO_SET_MISSION_CURRENT: Endpoint._cmd_mission_current,
 }
+
+
+def _route(cls) -> Route:
+    handler = f"_on_{cls.msgname.lower()}"
+    return Route(handler if hasattr(Endpoint, handler) else None, "target_system" in cls.fieldnames,
+                 "target_component" in cls.fieldnames, cls.msgname == "MANUAL_CONTROL")
+
+
+# every message of the dialect by type name; anything else (UNKNOWN_n) has no handler and no target fields
+ROUTES: dict[str, Route] = {cls.msgname: _route(cls) for cls in mav.mavlink_map.values()}
+NO_ROUTE = Route(None, False, False, False)
 
 
 # The signing gate's one table (DESIGN §4.1): what each message does, messages by name and commands (COMMAND_LONG
