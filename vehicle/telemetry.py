@@ -25,6 +25,7 @@ MSG_ID_AVAILABLE_MODES = _modes_wire.MAVLINK_MSG_ID_AVAILABLE_MODES
 MSG_ID_CURRENT_MODE = _modes_wire.MAVLINK_MSG_ID_CURRENT_MODE
 
 NO_INDEX = 65535
+MAVLINK_VERSION = 3  # HEARTBEAT.mavlink_version (what pymavlink's heartbeat_send fills in)
 HEALTH_SENSORS = (mav.MAV_SYS_STATUS_SENSOR_3D_GYRO | mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL
                   | mav.MAV_SYS_STATUS_SENSOR_3D_MAG | mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
                   | mav.MAV_SYS_STATUS_PREARM_CHECK)
@@ -50,7 +51,11 @@ DEFAULT_RATES = {
 
 
 class Telemetry:
-    """Scheduled and on-change reports through one encoder (``enc``: a pymavlink MAVLink instance)."""
+    """Scheduled and on-change reports through one encoder (``enc``: a pymavlink MAVLink instance).
+
+    Each builder constructs pymavlink's message object and hands it to ``enc.send``, which is what the generated
+    ``<name>_send`` methods do after ``<name>_encode``, two calls and a keyword pass fewer per frame (the
+    defaults are the same: tests/test_telemetry_fast_paths.py)."""
 
     def __init__(self, enc, vehicle: Vehicle, origin: Origin, boot_t: float, link_stats: Callable[[], tuple[int, int]],
                  mission_count: Callable[[], int]) -> None:
@@ -67,7 +72,8 @@ class Telemetry:
         self.last_status_key: tuple | None = None
         self.last_control_key: tuple | None = None
         self.last_mode: int | None = None
-        self._seen: tuple = (None, None, None, None)  # (book, service, holding, baseline holding) of the keys
+        # what the on-change keys were last computed from (see tick)
+        self._seen: tuple = (None,) * 7
 
     def boot_ms(self, t: float) -> int:
         return int(max(0.0, t - self.boot_t) * 1000) & 0xFFFFFFFF
@@ -94,13 +100,17 @@ class Telemetry:
             self.next_heartbeat = t + 1.0
             self._heartbeat(t)
         seen = self._seen
+        b = v.book
         c = v.contingency
         held = c is not None and c.holding
-        if v.book is not seen[0] or v.service is not seen[1] or v.holding != seen[2] or held != seen[3]:
-            # the keys below are functions of these values alone (a baseline's own hold included: it changes the
-            # state with no lease change): most ticks they are the very same objects, and nothing can have
-            # changed (so the tuple is only built when one did)
-            self._seen = (v.book, v.service, v.holding, held)
+        if (b.leases is not seen[0] or b.epoch != seen[1] or b.owner != seen[2] or b.takeover_allowed != seen[3]
+                or v.service is not seen[4] or v.holding != seen[5] or held != seen[6]):
+            # the keys of _on_change are functions of these values alone (the current lease is the first of the
+            # book's leases, the book and the service are immutable, the vehicle's contingency is set once; a
+            # baseline's own hold changes the state with no lease change). Most ticks they are the very same
+            # objects, and so are they on most of the ticks that get a new book: hearing the owner gives one
+            # with only its link watch changed.
+            self._seen = (b.leases, b.epoch, b.owner, b.takeover_allowed, v.service, v.holding, held)
             self._on_change(t)
         if t + 1e-9 < self.next_due:
             return
@@ -166,8 +176,8 @@ class Telemetry:
         elif state in (State.RETURNING, State.NAVIGATING):
             base |= mav.MAV_MODE_FLAG_AUTO_ENABLED
         system_status = mav.MAV_STATE_ACTIVE if v.armed else mav.MAV_STATE_STANDBY
-        self.mav.heartbeat_send(v.driver.mav_type, mav.MAV_AUTOPILOT_GENERIC, base, self.custom_mode(),
-                                system_status)
+        self.mav.send(mav.MAVLink_heartbeat_message(v.driver.mav_type, mav.MAV_AUTOPILOT_GENERIC, base,
+                                                    self.custom_mode(), system_status, MAVLINK_VERSION))
 
     def _sys_status(self, t: float) -> None:
         v = self.vehicle
@@ -178,7 +188,8 @@ class Telemetry:
         health = HEALTH_SENSORS | mav.MAV_SYS_STATUS_GEOFENCE | (mav.MAV_SYS_STATUS_SENSOR_GPS if gps_ok else 0)
         frames, bad = self.link_stats()
         drop = int(min(10000, 10000 * bad / max(1, frames + bad)))
-        self.mav.sys_status_send(present, present, health, 200, 24000, 1000, 90, drop, min(bad, 65535), 0, 0, 0, 0)
+        self.mav.send(mav.MAVLink_sys_status_message(present, present, health, 200, 24000, 1000, 90, drop,
+                                                     min(bad, 65535), 0, 0, 0, 0))
 
     def _fix_age(self, t: float) -> float:
         last = self.vehicle.last_fix_t
@@ -189,8 +200,9 @@ class Telemetry:
         lat, lon = self.origin.to_global(p.x, p.y)
         vx, vy = self._velocity(p.yaw)
         hdg = int(math.degrees(p.yaw) % 360 * 100)
-        self.mav.global_position_int_send(self.boot_ms(t), int(lat * 1e7), int(lon * 1e7),
-                                          int(self.origin.alt * 1000), 0, int(vx * 100), int(vy * 100), 0, hdg)
+        self.mav.send(mav.MAVLink_global_position_int_message(
+            self.boot_ms(t), int(lat * 1e7), int(lon * 1e7), int(self.origin.alt * 1000), 0, int(vx * 100),
+            int(vy * 100), 0, hdg))
 
     def _velocity(self, yaw: float) -> tuple[float, float]:
         """Over the ground at heading ``yaw`` (the pose's, which the caller already holds)."""
@@ -201,12 +213,12 @@ class Telemetry:
     def _local_position(self, t: float) -> None:
         p = self.vehicle.estimator.pose
         vx, vy = self._velocity(p.yaw)
-        self.mav.local_position_ned_send(self.boot_ms(t), p.x, p.y, 0.0, vx, vy, 0.0)
+        self.mav.send(mav.MAVLink_local_position_ned_message(self.boot_ms(t), p.x, p.y, 0.0, vx, vy, 0.0))
 
     def _attitude(self, t: float) -> None:
         v = self.vehicle
         rate = v.readings.yaw_rate if v.readings else 0.0
-        self.mav.attitude_send(self.boot_ms(t), 0.0, 0.0, v.estimator.pose.yaw, 0.0, 0.0, rate)
+        self.mav.send(mav.MAVLink_attitude_message(self.boot_ms(t), 0.0, 0.0, v.estimator.pose.yaw, 0.0, 0.0, rate))
 
     def _gps_raw(self, t: float) -> None:
         v = self.vehicle
@@ -215,22 +227,24 @@ class Telemetry:
         fresh = last is not None and self._fix_age(t) < 3.0
         lat, lon = self.origin.to_global(*(last if fresh else (0.0, 0.0)))
         eph = int(min(65535, (fix.std if fix else 0.7) * 100)) if fresh else 65535
-        self.mav.gps_raw_int_send(int(t * 1e6), 3 if fresh else 1, int(lat * 1e7) if fresh else 0,
-                                  int(lon * 1e7) if fresh else 0, int(self.origin.alt * 1000) if fresh else 0,
-                                  eph, 65535, 65535, 65535, 10 if fresh else 0)
+        self.mav.send(mav.MAVLink_gps_raw_int_message(
+            int(t * 1e6), 3 if fresh else 1, int(lat * 1e7) if fresh else 0, int(lon * 1e7) if fresh else 0,
+            int(self.origin.alt * 1000) if fresh else 0, eph, 65535, 65535, 65535, 10 if fresh else 0))
 
     def _extended_sys_state(self, t: float) -> None:
-        self.mav.extended_sys_state_send(mav.MAV_VTOL_STATE_UNDEFINED, mav.MAV_LANDED_STATE_ON_GROUND)
+        self.mav.send(mav.MAVLink_extended_sys_state_message(mav.MAV_VTOL_STATE_UNDEFINED,
+                                                             mav.MAV_LANDED_STATE_ON_GROUND))
 
     def _home(self, t: float) -> None:
         hx, hy = self.vehicle.home
         lat, lon = self.origin.to_global(hx, hy)
-        self.mav.home_position_send(int(lat * 1e7), int(lon * 1e7), int(self.origin.alt * 1000), hx, hy, 0.0,
-                                    [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(t * 1e6))
+        self.mav.send(mav.MAVLink_home_position_message(int(lat * 1e7), int(lon * 1e7), int(self.origin.alt * 1000),
+                                                        hx, hy, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
+                                                        int(t * 1e6)))
 
     def _autopilot_version(self, t: float) -> None:
-        self.mav.autopilot_version_send(CAPABILITIES, 0x00010000 | 0xFF, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0,
-                                        self.mav.srcSystem)
+        self.mav.send(mav.MAVLink_autopilot_version_message(CAPABILITIES, 0x00010000 | 0xFF, 0, 0, 0, [0] * 8, [0] * 8,
+                                                            [0] * 8, 0, 0, self.mav.srcSystem))
 
     def _mission_current(self, t: float) -> None:
         v = self.vehicle
@@ -239,7 +253,7 @@ class Telemetry:
         seq = st.items[st.item].seq if st is not None and 0 <= st.item < len(st.items) else 0
         state = mav.MISSION_STATE_ACTIVE if v.state() in (State.RETURNING, State.HOLDING, State.NAVIGATING) \
             else (mav.MISSION_STATE_NOT_STARTED if total else mav.MISSION_STATE_NO_MISSION)
-        self.mav.mission_current_send(max(0, seq), total, state)
+        self.mav.send(mav.MAVLink_mission_current_message(max(0, seq), total, state))
 
     def _current_mode(self, t: float) -> None:
         """CURRENT_MODE: sent on every mode change and on request (standard modes microservice)."""
@@ -262,7 +276,7 @@ class Telemetry:
         flags = mav.GCS_CONTROL_STATUS_FLAGS_SYSTEM_MANAGER
         if b.takeover_allowed:
             flags |= mav.GCS_CONTROL_STATUS_FLAGS_TAKEOVER_ALLOWED
-        self.mav.control_status_send(flags, b.owner or 0, [0] * 10)
+        self.mav.send(mav.MAVLink_control_status_message(flags, b.owner or 0, [0] * 10))
 
     def _lease_status(self, t: float) -> None:
         v = self.vehicle
@@ -274,14 +288,14 @@ class Telemetry:
         start = st.start if st is not None else (nan, nan)
         target = st.route.target if st is not None and st.route is not None and st.route.target else (nan, nan)
         remaining = v.route_remaining()
-        self.mav.lease_status_send(
+        self.mav.send(mav.MAVLink_lease_status_message(
             self.boot_ms(t), b.epoch or 0, b.owner or 0, b.owner_compid if b.owner else 0,
             wire_index(cur.index if cur else None), cur.newest_sub[0] if cur and cur.newest_sub else NO_INDEX,
             int(cur.holder) if cur else int(Holder.NONE), int(cur.claimed) if cur else 0, len(b.scheduled),
             v.state(), int(b.last_reason),
             0xFFFFFFFF if age is None else int(min(age, 4e6) * 1000), start[0], start[1], target[0], target[1],
             v.displacement(), st.max_displacement if st is not None and math.isfinite(st.max_displacement) else nan,
-            remaining, min(65535, v.trail.count))
+            remaining, min(65535, v.trail.count)))
 
 
 BUILDERS: dict[int, Callable[[Telemetry, float], None]] = {
