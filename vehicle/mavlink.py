@@ -675,9 +675,10 @@ class Endpoint:
         v = self.vehicle
         if v.events or v.notices or v.reached:  # (rarely: most ticks have nothing to announce)
             self._announce()
-        why = self.missions.tick(t)
-        if why:
-            self.statustext(why, mav.MAV_SEVERITY_WARNING)
+        if self.missions.upload is not None:  # (only an upload in progress has a time-out to run)
+            why = self.missions.tick(t)
+            if why:
+                self.statustext(why, mav.MAV_SEVERITY_WARNING)
         if self.key is not None:
             self.signing_timestamp(t)
             if t - self.stamp_saved_at >= STAMP_SAVE_EVERY:
