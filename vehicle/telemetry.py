@@ -124,7 +124,7 @@ class Telemetry:
                 # keep the average rate exact although ticks are coarser than the interval
                 nxt = due + interval
                 due = dues[msgid] = nxt if nxt > t else t + interval
-                self.emit(msgid, t)
+                BUILDERS[msgid](self, t)  # (every stream here has a builder: set_interval sees to it)
             if due < next_due:
                 next_due = due
         self.next_due = next_due
