@@ -72,8 +72,8 @@ class Telemetry:
         self.last_status_key: tuple | None = None
         self.last_control_key: tuple | None = None
         self.last_mode: int | None = None
-        # what the on-change keys were last computed from (see tick)
-        self._seen: tuple = (None,) * 7
+        self._seen: tuple = (None, None, None, None)  # (book, service, holding, baseline holding) of the keys
+        self._keys_from: tuple = (None,) * 8  # what the keys were last computed from (see _on_change)
 
     def boot_ms(self, t: float) -> int:
         return int(max(0.0, t - self.boot_t) * 1000) & 0xFFFFFFFF
@@ -100,18 +100,13 @@ class Telemetry:
             self.next_heartbeat = t + 1.0
             self._heartbeat(t)
         seen = self._seen
-        b = v.book
         c = v.contingency
         held = c is not None and c.holding
-        if (b.leases is not seen[0] or b.epoch != seen[1] or b.owner != seen[2] or b.takeover_allowed != seen[3]
-                or v.service is not seen[4] or v.holding != seen[5] or held != seen[6]):
-            # the keys of _on_change are functions of these values alone (the current lease is the first of the
-            # book's leases, the book and the service are immutable, the vehicle's contingency is set once; a
-            # baseline's own hold changes the state with no lease change). Most ticks they are the very same
-            # objects, and so are they on most of the ticks that get a new book: hearing the owner gives one
-            # with only its link watch changed.
-            self._seen = (b.leases, b.epoch, b.owner, b.takeover_allowed, v.service, v.holding, held)
-            self._on_change(t)
+        if v.book is not seen[0] or v.service is not seen[1] or v.holding != seen[2] or held != seen[3]:
+            # most ticks these are the very same objects and nothing can have changed (a baseline's own hold
+            # changes the state with no lease change, hence ``held``); the tuple is only built when one did
+            self._seen = (v.book, v.service, v.holding, held)
+            self._on_change(t, held)
         if t + 1e-9 < self.next_due:
             return
         # one pass: what is due is sent, and the earliest next due time is found on the way (the builders send
@@ -129,10 +124,23 @@ class Telemetry:
                 next_due = due
         self.next_due = next_due
 
-    def _on_change(self, t: float) -> None:
+    def _on_change(self, t: float, held: bool) -> None:
         """LEASE_STATUS, MISSION_CURRENT and CONTROL_STATUS due now, and CURRENT_MODE sent, if what they show
-        changed."""
+        changed.
+
+        The keys are functions of the book's leases (the current one is the first), epoch, owner and takeover
+        flag, of the service, of the contingency and of the operator's and the baseline's hold: all immutable or
+        plain values but the contingency, whose hold is watched. Hearing the owner gives a new book with only its
+        link watch changed, a fifth of the ticks: then these are the very same, and the keys are not computed
+        again."""
         v = self.vehicle
+        b = v.book
+        k = self._keys_from
+        if (b.leases is k[0] and b.epoch == k[1] and b.owner == k[2] and b.takeover_allowed == k[3]
+                and v.service is k[4] and v.holding == k[5] and held == k[6] and v.contingency is k[7]):
+            return
+        self._keys_from = (b.leases, b.epoch, b.owner, b.takeover_allowed, v.service, v.holding, held,
+                           v.contingency)
         status_key = self._status_key()
         if status_key != self.last_status_key:
             self.last_status_key = status_key
