@@ -43,6 +43,7 @@ from vehicle.telemetry import MSG_ID_AVAILABLE_MODES, Telemetry, wire_index
 mav = dialect.load()
 
 RETRY_WINDOW = 3.0  # s: an identical command from the same sender within this is a retry or a late copy
+BODY_FRAMES = frozenset((mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_OFFSET_NED, mav.MAV_FRAME_BODY_FRD))
 REJECT_NOTICE_GAP = 2.0  # s between STATUSTEXTs about a rejected stream (MANUAL_CONTROL, velocity targets)
 
 # MAVLink FTP (FILE_TRANSFER_PROTOCOL payload): this vehicle has no file server; it says so at once
@@ -453,7 +454,7 @@ class Endpoint:
             return  # no velocity in this target: only velocity teleop is supported on the ground
         vx, vy = _finite(m.vx), _finite(m.vy)
         yaw_rate = None if m.type_mask & 2048 else _finite(m.yaw_rate)
-        if m.coordinate_frame in (mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_OFFSET_NED, mav.MAV_FRAME_BODY_FRD):
+        if m.coordinate_frame in BODY_FRAMES:
             speed, turn = vx, yaw_rate if yaw_rate is not None else 0.0
         else:
             speed, turn = velocity_to_command(vx, vy, yaw_rate, self.vehicle.estimator.pose.yaw)
