@@ -106,3 +106,57 @@ def test_heading_is_the_matrix_update_bit_for_bit():
         want = (*(x + K * innov)[:, 0].tolist(), *((np.eye(4) - K @ H) @ P).ravel().tolist())
         got = est._values()
         assert [struct.pack("<d", v) for v in got] == [struct.pack("<d", v) for v in want]
+
+
+class _MatrixGateEstimator(Estimator):
+    """The position fix as it was written before the float gate: S, r and the gate in numpy, R made per fix."""
+
+    def fix(self, x: float, y: float, std: float) -> bool:
+        f = self._filter()
+        z = np.array([[x], [y]])
+        S = f.P[:2, :2] + np.eye(2) * std * std
+        r = z - f.x[:2]
+        m2 = float((r.T @ np.linalg.solve(S, r))[0, 0])
+        if m2 > self.config.fix_gate**2:
+            self.outlier_streak += 1
+            if self.outlier_streak < self.config.fix_streak:
+                self.fixes_rejected += 1
+                return False
+            self.divergences += 1
+            f.P[:2, :2] = f.P[:2, :2] + r @ r.T
+        self.outlier_streak = 0
+        f.update(z, lambda _x: np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]]), lambda s: s[:2], R=np.eye(2) * std * std)
+        self._pose = None
+        self.fixes_used += 1
+        return True
+
+
+def test_the_float_gate_and_cached_noise_take_the_same_fixes_as_the_matrix_gate_bit_for_bit():
+    """Fixes near and far (outliers, runs of them that widen the covariance), fix std changing now and then, with
+    predictions and headings between: the same verdicts, counters and state, to the last bit."""
+    rng = np.random.default_rng(11)
+    fast, ref = (cls(0.0, 0.0, 0.3, 0.0, pos_std=0.2) for cls in (Estimator, _MatrixGateEstimator))
+    std, t, verdicts = 0.5, 0.0, []
+    for k in range(3000):
+        t = round(t + DT, 9)
+        speed, rate, accel = rng.uniform(-1, 2), rng.normal(0, 0.3), rng.normal(0, 0.5)
+        for est in (fast, ref):
+            est.predict(speed, rate, t, accel)
+        if k % 5 == 0:
+            yaw = rng.uniform(-4, 4)
+            for est in (fast, ref):
+                est.heading(yaw, 0.05)
+        if k % 7 == 0:
+            if rng.uniform() < 0.05:
+                std = float(rng.uniform(0.1, 2.0))
+            far = rng.uniform() < 0.5
+            p = ref.pose
+            fx, fy = p.x + rng.normal(0, 8.0 if far else 0.3), p.y + rng.normal(0, 8.0 if far else 0.3)
+            got, want = fast.fix(fx, fy, std), ref.fix(fx, fy, std)
+            assert got == want
+            verdicts.append(got)
+        assert [struct.pack("<d", v) for v in fast._values()] == [struct.pack("<d", v) for v in ref._values()]
+    assert (fast.fixes_used, fast.fixes_rejected, fast.divergences) == (
+        ref.fixes_used, ref.fixes_rejected, ref.divergences)
+    assert ref.divergences > 5 and ref.fixes_rejected > 20 and ref.fixes_used > 100  # every path was taken
+    assert np.array_equal(fast.covariance, ref.covariance)

@@ -83,6 +83,8 @@ class Estimator:
         # fix (None: the filter's arrays hold the state): at 50 Hz between fixes, building arrays every tick cost
         # more than the arithmetic
         self._state: tuple[float, ...] | None = None
+        self._r_std = math.nan  # the std the cached R was made for (nan: none yet)
+        self._r = _I2
         self.inertial_speed = 0.0
         self.accel_bias = 0.0  # m/s^2, learnt while odometry and accelerometer agree
         self.residual = 0.0  # odometry minus inertial speed, smoothed
@@ -166,7 +168,10 @@ class Estimator:
         state = self._state
         if state is None:
             f = self._f
-            state = self._state = (*f.x[:, 0].tolist(), *f.P.ravel().tolist())
+            # (nested lists unpacked in Python: two numpy calls, where slicing and raveling first took four)
+            (x0,), (x1,), (x2,), (x3,) = f.x.tolist()
+            p0, p1, p2, p3 = f.P.tolist()
+            state = self._state = (x0, x1, x2, x3, *p0, *p1, *p2, *p3)
         return state
 
     def _filter(self) -> ExtendedKalmanFilter:
@@ -181,24 +186,41 @@ class Estimator:
             self._state = None
         return f
 
+    def _noise(self, std: float) -> np.ndarray:
+        """R for a fix of this std, made once per std (every fix of a receiver carries the same one)."""
+        if std != self._r_std:
+            self._r = _I2 * std * std
+            self._r_std = std
+        return self._r
+
     def fix(self, x: float, y: float, std: float) -> bool:
-        """Fuse a position fix; returns False if it was gated out as an outlier."""
-        f = self._filter()
-        z = np.array([[x], [y]])
-        S = f.P[:2, :2] + _I2 * std * std
-        r = z - f.x[:2]
-        m2 = float((r.T @ np.linalg.solve(S, r))[0, 0])
+        """Fuse a position fix; returns False if it was gated out as an outlier.
+
+        The gate is worked out on the floats, before any array is built: S = P[:2, :2] + std^2 I is 2x2, so
+        r' S^-1 r has a closed form, and a rejected fix never touches numpy (the float state stays as it is).
+        The closed form rounds differently from the ``np.linalg.solve`` it replaced; only the yes/no of the gate
+        depends on it, never a stored value. An accepted fix is handed to filterpy's update, once, as before:
+        at a few hertz, cache-cold, every numpy call around it cost more than its arithmetic."""
+        s = self._values()
+        var = std * std
+        r0, r1 = x - s[0], y - s[1]
+        s00, s01, s10, s11 = s[4] + var, s[5], s[8], s[9] + var  # S = P[:2, :2] + R
+        m2 = (s11 * r0 * r0 - (s01 + s10) * r0 * r1 + s00 * r1 * r1) / (s00 * s11 - s01 * s10)
         if m2 > self.config.fix_gate**2:
             self.outlier_streak += 1
             if self.outlier_streak < self.config.fix_streak:
                 self.fixes_rejected += 1
                 return False
             # every recent fix disagrees the same way: the dead reckoning drifted (odometry slipped) beyond what
-            # the covariance admits. Widen the position covariance to the disagreement and take the fix.
+            # the covariance admits. Widen the position covariance to the disagreement (P[:2, :2] + r r') and
+            # take the fix.
             self.divergences += 1
-            f.P[:2, :2] = f.P[:2, :2] + r @ r.T
+            p = list(s[4:])
+            p[0], p[1], p[4], p[5] = p[0] + r0 * r0, p[1] + r0 * r1, p[4] + r1 * r0, p[5] + r1 * r1
+            self._state = (*s[:4], *p)
         self.outlier_streak = 0
-        f.update(z, _jac_pos, _h_pos, R=_I2 * std * std)
+        f = self._filter()
+        f.update(np.array(((x,), (y,))), _jac_pos, _h_pos, R=self._noise(std))
         self._pose = None
         self.fixes_used += 1
         return True
