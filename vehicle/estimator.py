@@ -241,15 +241,17 @@ class Estimator:
                          0.0, 1.0, 0.0 - k1, 0.0,
                          0.0, 0.0, 1.0 - k2, 0.0,
                          0.0, 0.0, 0.0 - k3, 1.0)).reshape(4, 4)
-        P = i_kh @ np.array(s[4:]).reshape(4, 4)
+        p0, p1, p2, p3 = (i_kh @ np.array(s[4:]).reshape(4, 4)).tolist()  # (rows unpacked: no ravel call)
         self._state = (s[0] + k0 * innov, s[1] + k1 * innov, s[2] + k2 * innov, s[3] + k3 * innov,
-                       *P.ravel().tolist())
+                       *p0, *p1, *p2, *p3)
         self._pose = None
 
     @property
     def pose(self) -> Pose:
         if self._pose is None:
-            s = self._values()
+            s = self._state  # (``_values()``, its common case written out: a pose is made every tick)
+            if s is None:
+                s = self._values()
             x0, x1, x2, p00, p11 = s[0], s[1], s[2], s[4], s[9]
             std = math.sqrt(max(0.0, 0.5 * (p00 + p11)))
             yaw = (x2 + math.pi) % (2 * math.pi) - math.pi
