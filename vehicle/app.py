@@ -47,6 +47,10 @@ from vehicle.service import start as start_block
 from vehicle.service import step as step_block
 from vehicle.trail import Crumb, Trail, TrailConfig
 
+# enum members read through their class cost more than a function call (a descriptor lookup each time): what
+# runs every tick compares against these module-level names instead
+_OPERATOR, _RETURN_SERVICE = Holder.OPERATOR, Holder.RETURN_SERVICE
+
 DT = 0.02  # the control tick: 50 Hz
 SETPOINT_TTL = 0.5  # s: a teleop setpoint not refreshed this long is dropped (dead-man)
 MAX_TELEOP_SPEED = 2.0  # m/s at full stick
@@ -333,7 +337,7 @@ class Vehicle:
         cur = self.book.current
         if cur is None:
             return State.NO_OWNER
-        if cur.holder is Holder.OPERATOR:
+        if cur.holder is _OPERATOR:
             return State.TELEOP if cur.claimed else State.AWAITING_CLAIM
         if self.contingency is not None:
             return State.HOLDING if self.contingency.holding else State.RETURNING
@@ -374,16 +378,18 @@ class Vehicle:
             self.last_fix, self.last_fix_t = (fix.x, fix.y), t
         p = est.pose
         book = self.book
-        good = self.link_is_good = self.link_good(t)
+        good = self.link_is_good = book.owner is not None and book.link.good(t)  # (``link_good``, written out)
         if self.contingency is not None:
             self.contingency.observe(self, t)
         self._crumbs.append(Crumb(p.x, p.y, t, p.std, good))
 
-        self._apply(book.tick(t))
+        out = book.tick(t)
+        if out.book is not self.book or out.events or out.released:  # (most ticks nothing happens: no call)
+            self._apply(out)
         book = self.book
         cur = book.current
         # a block about to start plans from the whole trail; afterwards crumbs wait for their true tag again
-        starting = cur is not None and cur.holder is Holder.RETURN_SERVICE and self.service_index != cur.index
+        starting = cur is not None and cur.holder is _RETURN_SERVICE and self.service_index != cur.index
         self._lay_crumbs(t, flush=starting)
         speed, yaw_rate = self._control(t, p.x, p.y, p.yaw)
         if not self.armed:
@@ -413,7 +419,7 @@ class Vehicle:
     def _control(self, t: float, x: float, y: float, yaw: float) -> tuple[float, float]:
         book = self.book
         cur = book.current
-        if cur is None or cur.holder is Holder.OPERATOR:
+        if cur is None or cur.holder is _OPERATOR:
             self.service, self.service_index = None, None
             return self._teleop(t)
         self.setpoint = None

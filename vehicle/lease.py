@@ -19,6 +19,8 @@ from typing import Any, NamedTuple
 from vehicle.frozen import evolve
 from vehicle.link_watch import EPS, Delivery, LinkWatch, Trigger, WatchConfig
 
+_NO_TRIGGER = Trigger.NONE  # (read every tick: an enum member through its class costs more than a function call)
+
 NO_INDEX = 0xFFFF  # wire value for "no lease" in LEASE_EVENT / LEASE_STATUS
 RETURN_IN_PROGRESS = "return in progress"  # why a takeover (or a stranger's command) is refused during a return
 
@@ -390,7 +392,7 @@ class LeaseBook:
         if self.owner is None:
             return Outcome(self)
         link, trigger = self.link.step(t)
-        if trigger is Trigger.NONE:
+        if trigger is _NO_TRIGGER:
             return Outcome(self) if link is self.link else Outcome(evolve(self, link=link))
         book = replace(self, link=link)
         cur = self.leases[0]

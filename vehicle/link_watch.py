@@ -26,6 +26,7 @@ must not fire one period late because of it.
 from __future__ import annotations
 
 import enum
+from bisect import bisect_right
 from dataclasses import dataclass, field, replace
 
 from vehicle.frozen import evolve
@@ -45,6 +46,11 @@ class Trigger(enum.Enum):
     NONE = "none"
     LOST = "lost"
     REGAINED = "regained"
+
+
+# ``Trigger.NONE`` as a module-level name: an enum member read through its class costs more than a function call,
+# and ``step`` answers it on nearly every tick
+_NO_TRIGGER = Trigger.NONE
 
 
 @dataclass(frozen=True)
@@ -135,6 +141,17 @@ class Delivery:
         sent since)."""
         if self.newest is None or self.repeats >= STUCK_REPEATS:
             return None, None
+        arrivals = self.arrivals
+        times = [ta for ta, _ in arrivals]
+        if times != sorted(times):
+            return self._ratios_scan(t, short, long)  # a late packet: arrival times out of sequence order
+        # (every packet in order, the usual case: the arrivals inside a window are a tail of the list, found by
+        # bisection instead of a walk over every arrival; ``_ratios_scan`` is the same measure for any order)
+        return (_share_from(arrivals, bisect_right(times, t - short - EPS)),
+                _share_from(arrivals, bisect_right(times, t - long - EPS)))
+
+    def _ratios_scan(self, t: float, short: float, long: float) -> tuple[float, float]:
+        """``ratios`` by one walk over the arrivals, whatever the order of their times."""
         short_since, long_since = t - short - EPS, t - long - EPS
         short_in = short_lo = short_hi = long_in = long_lo = long_hi = 0
         short_before: int | None = None
@@ -156,6 +173,14 @@ class Delivery:
                 long_before = u
         return (_share(short_in, short_lo, short_hi, short_before),
                 _share(long_in, long_lo, long_hi, long_before))
+
+
+def _share_from(arrivals: tuple[tuple[float, int], ...], k: int) -> float:
+    """``_share`` of a window holding ``arrivals[k:]``, after ``arrivals[k - 1]`` (arrival times in order)."""
+    n = len(arrivals)
+    if k >= n:
+        return 0.0
+    return _share(n - k, arrivals[k][1], arrivals[-1][1], arrivals[k - 1][1] if k else None)
 
 
 def _share(inside: int, lo: int, hi: int, before: int | None) -> float:
@@ -215,19 +240,19 @@ class LinkWatch:
         """Evaluate the deadlines at ``t``: LOST, REGAINED or nothing."""
         last = self.last_heard
         if last is None:
-            return self, Trigger.NONE
+            return self, _NO_TRIGGER
         cfg = self.config
         age = t - last  # (``age``, written out: this runs every tick)
         if not self.lost:
             if age >= cfg.timeout - EPS or self.low:
                 # contact from before the loss never counts toward the regain
                 return replace(self, lost=True, contact_since=None, contact_packets=0), Trigger.LOST
-            return self, Trigger.NONE
+            return self, _NO_TRIGGER
         if (self.contact_since is not None and age <= cfg.contact_gap + EPS
                 and t - self.contact_since >= cfg.regain_s - EPS
                 and (self.delivery.newest is None or self.contact_packets >= REGAIN_PACKETS)):
             return replace(self, lost=False), Trigger.REGAINED
-        return self, Trigger.NONE
+        return self, _NO_TRIGGER
 
     def with_config(self, config: WatchConfig) -> LinkWatch:
         t = self.last_heard
