@@ -383,8 +383,8 @@ class Vehicle:
             self.contingency.observe(self, t)
         self._crumbs.append(Crumb(p.x, p.y, t, p.std, good))
 
-        out = book.tick(t)
-        if out.book is not self.book or out.events or out.released:  # (most ticks nothing happens: no call)
+        out = book.tick_changes(t)  # (None on most ticks: nothing happened)
+        if out is not None:
             self._apply(out)
         book = self.book
         cur = book.current

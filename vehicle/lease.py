@@ -389,11 +389,17 @@ class LeaseBook:
     def tick(self, t: float) -> Outcome:
         """Consume the link watch's trigger: COMMS_LOST of an operator lease, LINK_REGAINED of a service block
         (DESIGN §3.5). The watch alone decides whether the link was lost or regained."""
+        out = self.tick_changes(t)
+        return Outcome(self) if out is None else out
+
+    def tick_changes(self, t: float) -> Outcome | None:
+        """``tick``, with None for "the same book, nothing happened": the answer of nearly every 20 ms tick, for
+        which the vehicle loop then builds no ``Outcome``."""
         if self.owner is None:
-            return Outcome(self)
+            return None
         link, trigger = self.link.step(t)
         if trigger is _NO_TRIGGER:
-            return Outcome(self) if link is self.link else Outcome(evolve(self, link=link))
+            return None if link is self.link else Outcome(evolve(self, link=link))
         book = replace(self, link=link)
         cur = self.leases[0]
         if trigger is Trigger.LOST:
