@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from sim.driver import SimDriver
 from sim.scenario import load
 from vehicle.app import DT, Vehicle, run
+from vehicle.estimator import Pose
 from vehicle.mavlink import Endpoint, mav
 from vehicle.params import load_defaults
+from vehicle.trail import Crumb
 
 
 def test_run_paces_ticks_by_the_injected_clock_and_moves_frames():
@@ -78,3 +82,20 @@ def test_run_answers_a_command_that_arrives_between_ticks_before_the_next_tick()
     between = [k for k, _, c, _ in sent if abs(c - clock_sent) < 1e-12]
     assert sorted(between) == ["COMMAND_ACK", "HOME_POSITION"]  # the answers only: telemetry stays on the tick
     assert abs(vehicle.t - 1.0) < 1e-9 and abs(now[0] - 101.0) < 1e-9  # and the pacing is unchanged
+
+
+def test_the_crumbs_and_poses_of_a_tick_are_whole_values():
+    """The tick makes its crumb and its pose with ``tuple.__new__`` (every field in order): each must be the
+    same value as the named tuple's own constructor gives, every field present."""
+    sc = load("tunnel")
+    driver = SimDriver(sc, "rover", np.random.default_rng(1))
+    vehicle = Vehicle(driver, load_defaults(), sc.start, 0.0, seed=1)
+    t = 0.0
+    for _ in range(5):
+        t = round(t + DT, 9)
+        vehicle.tick(t)
+    p = vehicle.estimator.pose
+    assert type(p) is Pose and len(p) == len(Pose._fields) and p == Pose(p.x, p.y, p.yaw, p.std, p.t)
+    c = vehicle._crumbs[-1]
+    assert type(c) is Crumb and len(c) == len(Crumb._fields)
+    assert c[:5] == Crumb(p.x, p.y, t, p.std, vehicle.link_is_good)[:5] and math.isnan(c.rssi)

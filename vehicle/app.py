@@ -381,7 +381,9 @@ class Vehicle:
         good = self.link_is_good = book.owner is not None and book.link.good(t)  # (``link_good``, written out)
         if self.contingency is not None:
             self.contingency.observe(self, t)
-        self._crumbs.append(Crumb(p.x, p.y, t, p.std, good))
+        # (made by tuple.__new__ with every field in order, rssi unknown: the named tuple's own __new__ is a
+        # Python function, a third of the cost of a crumb recorded every tick)
+        self._crumbs.append(tuple.__new__(Crumb, (p.x, p.y, t, p.std, good, math.nan)))
 
         out = book.tick_changes(t)  # (None on most ticks: nothing happened)
         if out is not None:
