@@ -85,7 +85,7 @@ def test_run_answers_a_command_that_arrives_between_ticks_before_the_next_tick()
 
 
 def test_the_crumbs_and_poses_of_a_tick_are_whole_values():
-    """The tick makes its crumb and its pose with ``tuple.__new__`` (every field in order): each must be the
+    """The tick makes its crumb and its pose with ``_make`` (every field in order): each must be the
     same value as the named tuple's own constructor gives, every field present."""
     sc = load("tunnel")
     driver = SimDriver(sc, "rover", np.random.default_rng(1))

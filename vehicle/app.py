@@ -378,12 +378,12 @@ class Vehicle:
             self.last_fix, self.last_fix_t = (fix.x, fix.y), t
         p = est.pose
         book = self.book
-        good = self.link_is_good = book.owner is not None and book.link.good(t)  # (``link_good``, written out)
+        good = self.link_is_good = self.link_good(t)
         if self.contingency is not None:
             self.contingency.observe(self, t)
-        # (made by tuple.__new__ with every field in order, rssi unknown: the named tuple's own __new__ is a
-        # Python function, a third of the cost of a crumb recorded every tick)
-        self._crumbs.append(tuple.__new__(Crumb, (p.x, p.y, t, p.std, good, math.nan)))
+        # (``_make`` from every field in order, rssi unknown: it skips the keyword handling of the named tuple's
+        # generated ``__new__``, a crumb being recorded every tick)
+        self._crumbs.append(Crumb._make((p.x, p.y, t, p.std, good, math.nan)))
 
         out = book.tick_changes(t)  # (None on most ticks: nothing happened)
         if out is not None:

@@ -255,9 +255,9 @@ class Estimator:
             x0, x1, x2, p00, p11 = s[0], s[1], s[2], s[4], s[9]
             std = math.sqrt(max(0.0, 0.5 * (p00 + p11)))
             yaw = (x2 + math.pi) % (2 * math.pi) - math.pi
-            # (made by tuple.__new__ with all five fields in order: the named tuple's own __new__ is a Python
-            # function, a third of the cost of a pose made every tick)
-            self._pose = tuple.__new__(Pose, (x0, x1, yaw, std, self.t))
+            # (``_make`` from all five fields in order: it skips the keyword handling of the named tuple's generated
+            # ``__new__``, a pose being made every tick)
+            self._pose = Pose._make((x0, x1, yaw, std, self.t))
         return self._pose
 
     @property
