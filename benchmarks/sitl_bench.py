@@ -7,7 +7,7 @@ with other work, and CPU time is what one core of a campaign pays. Each figure i
 The round trip is wall time by nature (a ground station waits for it), measured against the same ``Server`` class
 `returnlink sim serve` runs, in a thread of this process, on a perfect link.
 
-    python benchmarks/sitl_bench.py [--repeat 3] [--kind rover|legged] [--no-profile] [--no-roundtrip]
+    python benchmarks/sitl_bench.py [--repeat 5] [--kind rover|legged] [--no-profile] [--no-roundtrip]
 """
 
 from __future__ import annotations
@@ -216,7 +216,7 @@ def round_trips(n: int = ROUND_TRIPS) -> list[float]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeat", type=int, default=3, help="runs per robot; the median is shown")
+    ap.add_argument("--repeat", type=int, default=5, help="runs per robot; the median is shown")
     ap.add_argument("--kind", choices=KINDS, action="append",
                     help="robot to measure (repeatable); both when not given")
     ap.add_argument("--no-profile", action="store_true")
