@@ -19,6 +19,7 @@ from vehicle.estimator import Estimator
 from vehicle.io import Readings, RobotDriver
 from vehicle.lease import (
     Check,
+    ExecutionLease,
     ExpireReason,
     Holder,
     LeaseBook,
@@ -61,6 +62,11 @@ class State:
     """RETURNLINK_STATE."""
 
     NO_OWNER, TELEOP, AWAITING_CLAIM, RETURNING, HOLDING, NAVIGATING = range(6)
+
+
+# what ``Vehicle.state`` answers every tick, as module-level names (cheaper to read than through the class)
+_NO_OWNER, _TELEOP, _AWAITING_CLAIM = State.NO_OWNER, State.TELEOP, State.AWAITING_CLAIM
+_RETURNING, _HOLDING, _NAVIGATING = State.RETURNING, State.HOLDING, State.NAVIGATING
 
 
 @dataclass(frozen=True)
@@ -333,21 +339,26 @@ class Vehicle:
 
     # ----- queries -----------------------------------------------------------------------------------------
     def state(self) -> int:
-        """RETURNLINK_STATE now."""
-        cur = self.book.current
-        if cur is None:
-            return State.NO_OWNER
+        """RETURNLINK_STATE now.
+
+        Asked several times a tick (telemetry, the simulator's record): the current lease is read from the
+        book's tuple rather than through its property, and the states are module-level names (a class
+        attribute read costs more)."""
+        leases = self.book.leases
+        if not leases:
+            return _NO_OWNER
+        cur = leases[0]
         if cur.holder is _OPERATOR:
-            return State.TELEOP if cur.claimed else State.AWAITING_CLAIM
+            return _TELEOP if cur.claimed else _AWAITING_CLAIM
         if self.contingency is not None:
-            return State.HOLDING if self.contingency.holding else State.RETURNING
+            return _HOLDING if self.contingency.holding else _RETURNING
         st = self.service
         if st is None or st.item < 0:
-            return State.RETURNING
+            return _RETURNING
         command = st.items[st.item].command
         if command == NAV_LOITER_TIME:
-            return State.HOLDING
-        return State.NAVIGATING if command == NAV_WAYPOINT else State.RETURNING
+            return _HOLDING
+        return _NAVIGATING if command == NAV_WAYPOINT else _RETURNING
 
     def link_good(self, t: float) -> bool:
         """The link tag of a crumb laid now (the link watch decides)."""
@@ -378,7 +389,8 @@ class Vehicle:
             self.last_fix, self.last_fix_t = (fix.x, fix.y), t
         p = est.pose
         book = self.book
-        good = self.link_is_good = self.link_good(t)
+        # ``link_good`` written out: a method call per tick saved
+        good = self.link_is_good = book.owner is not None and book.link.good(t)
         if self.contingency is not None:
             self.contingency.observe(self, t)
         # (``_make`` from every field in order, rssi unknown: it skips the keyword handling of the named tuple's
@@ -389,11 +401,12 @@ class Vehicle:
         if out is not None:
             self._apply(out)
         book = self.book
-        cur = book.current
+        leases = book.leases  # (``book.current`` written out: the property is a Python call per tick)
+        cur = leases[0] if leases else None
         # a block about to start plans from the whole trail; afterwards crumbs wait for their true tag again
         starting = cur is not None and cur.holder is _RETURN_SERVICE and self.service_index != cur.index
         self._lay_crumbs(t, flush=starting)
-        speed, yaw_rate = self._control(t, p.x, p.y, p.yaw)
+        speed, yaw_rate = self._control(t, cur, p.x, p.y, p.yaw)
         if not self.armed:
             speed, yaw_rate = 0.0, 0.0
         self.command_out = (speed, yaw_rate)
@@ -410,7 +423,8 @@ class Vehicle:
         good crumbs, and a later return must not take them for lost ones and drive away from the operator).
         """
         crumbs = self._crumbs
-        horizon = t if flush else t - self.params["LNK_GOOD_S"]
+        # (the value read from the parameters' dict: ``Params.__getitem__`` is a Python call every tick)
+        horizon = t if flush else t - self.params.values["LNK_GOOD_S"]
         last = self.book.link.last_good
         add = self.trail.add
         while crumbs and crumbs[0].t <= horizon:
@@ -418,9 +432,9 @@ class Vehicle:
             good = c.link_good and last is not None and last >= c.t
             add(c if good == c.link_good else c._replace(link_good=good))
 
-    def _control(self, t: float, x: float, y: float, yaw: float) -> tuple[float, float]:
+    def _control(self, t: float, cur: ExecutionLease | None, x: float, y: float, yaw: float) -> tuple[float, float]:
+        """The commands of ``cur``, the book's current lease (the tick has it in hand already)."""
         book = self.book
-        cur = book.current
         if cur is None or cur.holder is _OPERATOR:
             self.service, self.service_index = None, None
             return self._teleop(t)
