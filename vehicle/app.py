@@ -51,6 +51,7 @@ from vehicle.trail import Crumb, Trail, TrailConfig
 # enum members read through their class cost more than a function call (a descriptor lookup each time): what
 # runs every tick compares against these module-level names instead
 _OPERATOR, _RETURN_SERVICE = Holder.OPERATOR, Holder.RETURN_SERVICE
+_EXECUTE = Verdict.EXECUTE
 
 DT = 0.02  # the control tick: 50 Hz
 SETPOINT_TTL = 0.5  # s: a teleop setpoint not refreshed this long is dropped (dead-man)
@@ -501,11 +502,13 @@ class Vehicle:
         if self._cleared[0] is not book or self._cleared[1] is not sp:
             # (skipped when both guards passed for this very book and setpoint: both are immutable and the guards
             # pure reads of them, so on most ticks of a drive the verdict is already known)
-            if book.check(book.owner or 0, sp.lease).verdict is not Verdict.EXECUTE:
+            if book.check(book.owner or 0, sp.lease).verdict is not _EXECUTE:
                 # the lease this setpoint was sent under is gone: it must not drive the robot any more
                 self.setpoint = None
                 return 0.0, 0.0
-            if book.current_id is None or sp.lease.path[0] != book.current_id.path[0]:
+            # (``book.current_id`` compared by its parts: it builds a frozen LeaseId each time it is read)
+            leases = book.leases
+            if not leases or book.epoch is None or sp.lease.path[0] != leases[0].index:
                 # a last guard at the actuator, independent of how the setpoint got here: never drive on it
                 self.stale_commands_executed += 1
                 self.setpoint = None

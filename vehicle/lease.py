@@ -60,6 +60,11 @@ class Verdict(enum.Enum):
     REJECT = "reject"
 
 
+# ``check`` runs for every command and on ticks a teleop setpoint is judged: its accepting path compares against
+# these module-level names (an enum member read through its class costs more than a function call)
+_EXECUTE, _OPERATOR = Verdict.EXECUTE, Holder.OPERATOR
+
+
 class RejectReason(enum.Enum):
     NOT_IN_CONTROL = "not in control"
     WRONG_EPOCH = "wrong epoch"
@@ -304,12 +309,12 @@ class LeaseBook:
             return Check(Verdict.REJECT, claim, RejectReason.EXPIRED,
                          f"{claim} expired; current is [{self.epoch},{cur.index}]")
         if index == cur.index:
-            if cur.holder is Holder.OPERATOR and not cur.claimed:
+            if cur.holder is _OPERATOR and not cur.claimed:
                 return Check(Verdict.REJECT, claim, RejectReason.EXPIRED, f"{claim} is not claimed yet")
             sub = claim.path[1:]
             if sub and not _sub_is_live(sub, cur.newest_sub):
                 return Check(Verdict.REJECT, claim, RejectReason.EXPIRED, f"sublease {claim} superseded")
-            return Check(Verdict.EXECUTE, claim)
+            return Check(_EXECUTE, claim)
         if self.lease(index) is not None:
             return Check(Verdict.QUEUE, claim)
         return Check(Verdict.REJECT, claim, RejectReason.INVALID, f"{claim} does not exist; claim it first")
