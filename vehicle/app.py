@@ -390,8 +390,7 @@ class Vehicle:
             self.last_fix, self.last_fix_t = (fix.x, fix.y), t
         p = est.pose
         book = self.book
-        # ``link_good`` written out: a method call per tick saved
-        good = self.link_is_good = book.owner is not None and book.link.good(t)
+        good = self.link_is_good = self.link_good(t)
         if self.contingency is not None:
             self.contingency.observe(self, t)
         # (``_make`` from every field in order, rssi unknown: it skips the keyword handling of the named tuple's
