@@ -37,12 +37,16 @@ class SimDriver:
         # the vehicle calls these every tick: the robot's and the sensors' own methods, with no forwarding call
         self.command: Callable[[float, float], None] = self.robot.command
         self.read: Callable[[float, float], Readings] = self.sensors.read
+        # the three calls of every physics step, bound once rather than looked up through two objects each tick
+        self._before_step = self.robot.before_step
+        self._world_step = self.world.step
+        self._after_step = self.robot.after_step
 
     def advance(self, dt: float) -> None:
-        """One physics step of ``dt`` seconds."""
-        self.robot.before_step(dt)
-        self.world.step(dt)
-        self.robot.after_step(dt)
+        """One physics step of ``dt`` seconds: the robot pushes, pymunk steps, the robot reads where it went."""
+        self._before_step(dt)
+        self._world_step(dt)
+        self._after_step(dt)
 
     @property
     def pose(self) -> tuple[float, float, float]:

@@ -240,22 +240,33 @@ class Legged(Robot):
         return self._hips()
 
     def limits(self, speed: float, yaw_rate: float) -> tuple[float, float]:
+        """Every physics step calls this: the three ``_clamp`` calls and ``max(0.3, f)`` are written out (the
+        same comparisons in the same order, so the same floats), as a helper's call costs more than its
+        arithmetic."""
         s = self.spec
         # choose the step frequency for this speed, then clamp speed to what the stride allows at that frequency
         need_hz = 2.0 * abs(speed) / self._stride_divisor
-        self.step_hz = _clamp(need_hz, s.min_step_hz, s.max_step_hz)
-        cap = self.max_stride * self.step_hz / 2.0
-        speed = _clamp(speed, -cap, cap)
+        hi, lo = s.max_step_hz, s.min_step_hz
+        need_hz = need_hz if need_hz < hi else hi
+        step_hz = self.step_hz = need_hz if need_hz > lo else lo
+        cap = self.max_stride * step_hz / 2.0
+        speed = speed if speed < cap else cap
+        speed = speed if speed > -cap else -cap
         # turning also uses up stride: the outer feet travel further
-        turn_cap = s.max_yaw_rate * max(0.3, 1.0 - abs(speed) / self._speed_divisor)
-        return speed, _clamp(yaw_rate, -turn_cap, turn_cap)
+        free = 1.0 - abs(speed) / self._speed_divisor
+        turn_cap = s.max_yaw_rate * (free if free > 0.3 else 0.3)  # ``max(0.3, free)``, NaN alike
+        yaw_rate = yaw_rate if yaw_rate < turn_cap else turn_cap
+        return speed, (yaw_rate if yaw_rate > -turn_cap else -turn_cap)
 
     def after_step(self, dt: float) -> None:
-        super().after_step(dt)
+        # (``Robot.after_step`` named, not ``super()``: no proxy object built every physics step)
+        Robot.after_step(self, dt)
         old = self.phase
-        self.phase = (self.phase + self.step_hz * dt) % 1.0
-        moving = abs(self.speed) > 0.02 or abs(self.yaw_rate) > 0.02
-        if moving and (old < 0.5 <= self.phase or self.phase < old):
+        phase = self.phase = (old + self.step_hz * dt) % 1.0
+        # ``abs(v) > 0.02`` of the speed and of the rate as two comparisons each (the same test, NaN included)
+        speed, rate = self.speed, self.yaw_rate
+        moving = speed > 0.02 or speed < -0.02 or rate > 0.02 or rate < -0.02
+        if moving and (old < 0.5 <= phase or phase < old):
             # touchdown of a diagonal pair: Raibert foot placement ahead of the hip, plus slip
             self.steps += 1
             self.slip = self.spec.slip_std * self.normal()

@@ -92,6 +92,29 @@ def test_command_and_step_limits_are_clamp_and_approach(kind):
         robot.after_step(0.02)
 
 
+def test_legged_limits_are_the_clamps_they_write_out():
+    """``Legged.limits`` writes out ``_clamp`` and ``max(0.3, ...)``: the very same floats and step frequency as
+    the helpers give, for speeds and rates past every limit, at the limits, signed zeros and NaN."""
+    from sim.robots import _clamp
+
+    def reference(robot, speed: float, yaw_rate: float) -> tuple[float, float, float]:
+        s = robot.spec
+        step_hz = _clamp(2.0 * abs(speed) / robot._stride_divisor, s.min_step_hz, s.max_step_hz)
+        cap = robot.max_stride * step_hz / 2.0
+        speed = _clamp(speed, -cap, cap)
+        turn_cap = s.max_yaw_rate * max(0.3, 1.0 - abs(speed) / robot._speed_divisor)
+        return speed, _clamp(yaw_rate, -turn_cap, turn_cap), step_hz
+
+    robot = make_robot("legged", World(()), 0.0, 0.0, 0.0, np.random.default_rng(0))
+    rng = np.random.default_rng(5)
+    edges = [0.0, -0.0, math.nan, robot.max_speed, -robot.max_speed, robot.max_speed * 0.7 + 1e-6, 5.0, -5.0]
+    cases = [(a, b) for a in edges for b in edges + [robot.spec.max_yaw_rate, -robot.spec.max_yaw_rate]]
+    cases += [(float(rng.normal(0.0, 1.5)), float(rng.normal(0.0, 1.5))) for _ in range(300)]
+    for speed, yaw_rate in cases:
+        got = robot.limits(speed, yaw_rate)
+        assert [v.hex() for v in (*got, robot.step_hz)] == [v.hex() for v in reference(robot, speed, yaw_rate)]
+
+
 def test_gps_denied_is_point_in_polygon_over_every_zone():
     """The world tests its denied zones over edges worked out once: the same answer as the polygon test, on and
     around the vertices and edges too."""
