@@ -18,6 +18,9 @@ from sim.world import World
 from vehicle.io import Fix, Readings
 
 _GET_ANGULAR_VELOCITY = lib.cpBodyGetAngularVelocity  # pymunk's property, without its Python layers
+# the named tuples' documented ``_make``: built from every field in order, without the generated ``__new__``'s
+# Python call and keyword handling (a reading every tick, a fix five times a second)
+_READINGS, _FIX = Readings._make, Fix._make
 
 
 @dataclass(frozen=True)
@@ -69,11 +72,11 @@ class Sensors:
             if self.world.gps_denied(x, y):
                 self.denied_ticks += 1
             elif self.rng.random() >= s.fix_dropout:
-                fix = Fix(x + s.fix_std * normal(), y + s.fix_std * normal(), s.fix_std)
+                fix = _FIX((x + s.fix_std * normal(), y + s.fix_std * normal(), s.fix_std))
                 self.fixes += 1
         heading = None
         if t + 1e-9 >= self._next_heading:
             self._next_heading = t + 1.0 / s.heading_hz
             heading = robot.pose[2] + s.heading_std * normal()
         accel = robot.accel + self.accel_bias + s.accel_noise * self.imu_normal()
-        return Readings(t, robot.odometry_speed(dt), gyro, fix, heading, s.heading_std, accel)
+        return _READINGS((t, robot.odometry_speed(dt), gyro, fix, heading, s.heading_std, accel))
