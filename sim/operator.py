@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from gcs.station import GroundStation, Pending, Transfer, mav
+from gcs.station import GroundStation, LeaseStatus, Pending, Transfer, Vehicle, mav
 from link.mission import Item
 
 STALE_TELEMETRY = 1.0  # s: an operator stops pushing the stick when the picture freezes
@@ -24,6 +24,7 @@ WAYPOINT_RADIUS = 1.5  # m
 # what ``step`` compares the vehicle's status with every tick, looked up in the dialect once
 _AWAITING_CLAIM, _TELEOP = mav.RETURNLINK_STATE_AWAITING_CLAIM, mav.RETURNLINK_STATE_TELEOP
 _RETURNING, _COMMS_LOST = mav.RETURNLINK_STATE_RETURNING, mav.LEASE_EXPIRE_REASON_COMMS_LOST
+_SETTING_UP = frozenset(("connect", "acquiring", "uploading", "arming"))  # the phases before it drives
 
 
 @dataclass
@@ -61,36 +62,11 @@ class Operator:
 
     def step(self, t: float) -> None:
         gs, v = self.gs, self.gs.vehicle
-        fresh = v.last_heard is not None and t - v.last_heard < STALE_TELEMETRY
         st = v.status
-        if self.phase == "connect":
-            if v.last_heard is not None and st is not None:
-                self.pending = gs.acquire()
-                self.phase = "acquiring"
+        if self.phase in _SETTING_UP:  # one lookup on the ticks that drive (nearly all), not four comparisons
+            self._set_up(t, gs, v, st)
             return
-        if self.phase == "acquiring":
-            if self.pending and self.pending.done:
-                if self.pending.ok:
-                    self._say(t, f"in control, epoch {self.pending.param2}")
-                    self.transfer = gs.upload(self.plan) if self.plan else None
-                    self.phase = "uploading"
-                else:
-                    self.phase = "connect"
-            return
-        if self.phase == "uploading":
-            if self.transfer is None or self.transfer.done:
-                if self.transfer is not None:
-                    self._say(t, f"plan upload {'accepted' if self.transfer.ok else 'failed'}")
-                self.pending = gs.arm(True)
-                self.phase = "arming"
-            return
-        if self.phase == "arming":
-            if self.pending and self.pending.done:
-                if self.pending.ok:
-                    self.phase = "driving"
-                else:
-                    self.pending = gs.arm(True)
-            return
+        fresh = v.last_heard is not None and t - v.last_heard < STALE_TELEMETRY
         if st is None:
             return
         if st.state == _AWAITING_CLAIM and st.owner == gs.sysid and fresh:
@@ -120,6 +96,36 @@ class Operator:
             gs.stop()
         else:
             self._drive(leg)
+
+    def _set_up(self, t: float, gs: GroundStation, v: Vehicle, st: LeaseStatus | None) -> None:
+        """Connect, take control, upload the plan, arm: one phase a tick until it drives."""
+        if self.phase == "connect":
+            if v.last_heard is not None and st is not None:
+                self.pending = gs.acquire()
+                self.phase = "acquiring"
+            return
+        if self.phase == "acquiring":
+            if self.pending and self.pending.done:
+                if self.pending.ok:
+                    self._say(t, f"in control, epoch {self.pending.param2}")
+                    self.transfer = gs.upload(self.plan) if self.plan else None
+                    self.phase = "uploading"
+                else:
+                    self.phase = "connect"
+            return
+        if self.phase == "uploading":
+            if self.transfer is None or self.transfer.done:
+                if self.transfer is not None:
+                    self._say(t, f"plan upload {'accepted' if self.transfer.ok else 'failed'}")
+                self.pending = gs.arm(True)
+                self.phase = "arming"
+            return
+        # arming
+        if self.pending and self.pending.done:
+            if self.pending.ok:
+                self.phase = "driving"
+            else:
+                self.pending = gs.arm(True)
 
     def _drive(self, leg: Leg) -> None:
         gs, v = self.gs, self.gs.vehicle
