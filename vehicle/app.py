@@ -340,15 +340,11 @@ class Vehicle:
 
     # ----- queries -----------------------------------------------------------------------------------------
     def state(self) -> int:
-        """RETURNLINK_STATE now.
-
-        Asked several times a tick (telemetry, the simulator's record): the current lease is read from the
-        book's tuple rather than through its property, and the states are module-level names (a class
-        attribute read costs more)."""
-        leases = self.book.leases
-        if not leases:
+        """RETURNLINK_STATE now. Asked several times a tick (telemetry, the simulator's record): the states are
+        module-level names (a class attribute read costs more)."""
+        cur = self.book.current
+        if cur is None:
             return _NO_OWNER
-        cur = leases[0]
         if cur.holder is _OPERATOR:
             return _TELEOP if cur.claimed else _AWAITING_CLAIM
         if self.contingency is not None:
@@ -401,8 +397,7 @@ class Vehicle:
         if out is not None:
             self._apply(out)
         book = self.book
-        leases = book.leases  # (``book.current`` written out: the property is a Python call per tick)
-        cur = leases[0] if leases else None
+        cur = book.current
         # a block about to start plans from the whole trail; afterwards crumbs wait for their true tag again
         starting = cur is not None and cur.holder is _RETURN_SERVICE and self.service_index != cur.index
         self._lay_crumbs(t, flush=starting)
@@ -423,8 +418,7 @@ class Vehicle:
         good crumbs, and a later return must not take them for lost ones and drive away from the operator).
         """
         crumbs = self._crumbs
-        # (the value read from the parameters' dict: ``Params.__getitem__`` is a Python call every tick)
-        horizon = t if flush else t - self.params.values["LNK_GOOD_S"]
+        horizon = t if flush else t - self.params["LNK_GOOD_S"]
         last = self.book.link.last_good
         add = self.trail.add
         while crumbs and crumbs[0].t <= horizon:
@@ -506,8 +500,8 @@ class Vehicle:
                 self.setpoint = None
                 return 0.0, 0.0
             # (``book.current_id`` compared by its parts: it builds a frozen LeaseId each time it is read)
-            leases = book.leases
-            if not leases or book.epoch is None or sp.lease.path[0] != leases[0].index:
+            cur = book.current
+            if cur is None or book.epoch is None or sp.lease.path[0] != cur.index:
                 # a last guard at the actuator, independent of how the setpoint got here: never drive on it
                 self.stale_commands_executed += 1
                 self.setpoint = None
