@@ -37,19 +37,6 @@ def normal_draws(rng: np.random.Generator, block: int = 1024) -> Iterator[float]
         yield from rng.standard_normal(block).tolist()
 
 
-def _clamp(v: float, lo: float, hi: float) -> float:
-    """``max(lo, min(hi, v))`` exactly (ties, signed zeros and NaN alike), without two builtin calls a tick."""
-    v = v if v < hi else hi
-    return v if v > lo else lo
-
-
-def _approach(current: float, target: float, max_step: float) -> float:
-    """``current`` moved toward ``target`` by at most ``max_step``."""
-    d = target - current
-    d = d if d < max_step else max_step
-    return current + (d if d > -max_step else -max_step)
-
-
 class Robot:
     kind = "robot"
     mav_type = 10  # MAV_TYPE_GROUND_ROVER

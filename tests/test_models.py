@@ -66,11 +66,20 @@ def test_the_pose_is_where_the_body_is_after_every_step(kind):
     assert world.collisions >= 1
 
 
+def _clamp(v: float, lo: float, hi: float) -> float:
+    """The clamp the physics step writes out, by the builtins (ties, signed zeros and NaN decide alike)."""
+    return max(lo, min(hi, v))
+
+
+def _approach(current: float, target: float, max_step: float) -> float:
+    """The rate limit the physics step writes out: ``current`` moved toward ``target`` by at most ``max_step``."""
+    return current + max(-max_step, min(max_step, target - current))
+
+
 @pytest.mark.parametrize("kind", ["rover", "legged"])
 def test_command_and_step_limits_are_clamp_and_approach(kind):
     """``command`` and ``before_step`` write out ``_clamp`` and ``_approach`` for speed: they must give the very
     same floats, over commands beyond the limits both ways, small steps and reversals."""
-    from sim.robots import _approach, _clamp
 
     def bits(*values: float) -> list[str]:  # every bit, the sign of a zero too
         return [v.hex() for v in values]
@@ -95,7 +104,6 @@ def test_command_and_step_limits_are_clamp_and_approach(kind):
 def test_legged_limits_are_the_clamps_they_write_out():
     """``Legged.limits`` writes out ``_clamp`` and ``max(0.3, ...)``: the very same floats and step frequency as
     the helpers give, for speeds and rates past every limit, at the limits, signed zeros and NaN."""
-    from sim.robots import _clamp
 
     def reference(robot, speed: float, yaw_rate: float) -> tuple[float, float, float]:
         s = robot.spec
