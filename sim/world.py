@@ -35,24 +35,15 @@ class Station:
     power_dbm: float = 20.0
 
 
-def point_in_polygon(x: float, y: float, poly: tuple[tuple[float, float], ...]) -> bool:
-    inside = False
-    n = len(poly)
-    for i in range(n):
-        (x1, y1), (x2, y2) = poly[i], poly[(i + 1) % n]
-        if (y1 > y) != (y2 > y) and x < (x2 - x1) * (y - y1) / (y2 - y1) + x1:
-            inside = not inside
-    return inside
-
-
 def _edges(poly: tuple[tuple[float, float], ...]) -> tuple[tuple[float, float, float, float], ...]:
-    """The polygon's edges (x1, y1, x2, y2) in ``point_in_polygon``'s order, closing edge last."""
+    """The polygon's edges (x1, y1, x2, y2) in vertex order, closing edge last."""
     n = len(poly)
     return tuple((*poly[i], *poly[(i + 1) % n]) for i in range(n))
 
 
 def _inside(x: float, y: float, edges: tuple[tuple[float, float, float, float], ...]) -> bool:
-    """``point_in_polygon`` over edges worked out beforehand: the same crossing test, in the same order."""
+    """Whether (x, y) is inside the polygon of ``edges`` (worked out beforehand): the even-odd crossing test of a
+    ray toward +x."""
     inside = False
     for x1, y1, x2, y2 in edges:
         if (y1 > y) != (y2 > y) and x < (x2 - x1) * (y - y1) / (y2 - y1) + x1:

@@ -123,11 +123,20 @@ def test_legged_limits_are_the_clamps_they_write_out():
         assert [v.hex() for v in (*got, robot.step_hz)] == [v.hex() for v in reference(robot, speed, yaw_rate)]
 
 
-def test_gps_denied_is_point_in_polygon_over_every_zone():
-    """The world tests its denied zones over edges worked out once: the same answer as the polygon test, on and
-    around the vertices and edges too."""
-    from sim.world import point_in_polygon
+def point_in_polygon(x: float, y: float, poly: tuple[tuple[float, float], ...]) -> bool:
+    """The even-odd crossing test over the polygon's vertices, as the world ran it before it prepared edges."""
+    inside = False
+    n = len(poly)
+    for i in range(n):
+        (x1, y1), (x2, y2) = poly[i], poly[(i + 1) % n]
+        if (y1 > y) != (y2 > y) and x < (x2 - x1) * (y - y1) / (y2 - y1) + x1:
+            inside = not inside
+    return inside
 
+
+def test_gps_denied_is_point_in_polygon_over_every_zone():
+    """The world tests its denied zones over edges worked out once: the same answer as the polygon test over its
+    vertices (``point_in_polygon`` here), on and around the vertices and edges too."""
     zones = (((3.0, -3.0), (42.0, -3.0), (62.0, 16.0), (56.0, 22.0), (38.0, 3.0), (3.0, 3.0)),
              ((-10.0, -10.0), (-4.0, -10.0), (-4.0, -4.0)))
     world = World((), zones)
