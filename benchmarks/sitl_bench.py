@@ -39,6 +39,8 @@ ROUND_TRIP_TARGET_MS = 20.0  # DESIGN §8: the COMMAND_ACK leaves in the tick th
 # Where a profiled function's own time is booked: the first prefix of its file path that matches. Helpers that
 # belong to no subsystem (numpy, builtins, dataclasses...) are booked to whoever called them (see ``_booked``).
 GROUPS = [
+    ("vehicle/endpoint.py", "vehicle endpoint"), ("vehicle/services/telemetry.py", "telemetry"),
+    ("vehicle/services/heartbeat.py", "telemetry"), ("vehicle/services/", "vehicle endpoint"),
     ("vehicle/estimator.py", "estimator"), ("filterpy/", "estimator"),
     ("sim/world.py", "physics"), ("sim/robots.py", "physics"), ("pymunk/", "physics"),
     ("sim/sensors.py", "sensors"), ("sim/driver.py", "sensors"),

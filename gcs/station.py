@@ -15,7 +15,9 @@ from dataclasses import dataclass, field, replace
 from link import dialect
 from link.codec import read_frames
 from link.mission import Item, item_from_message
+from link.setpoints import VELOCITY, VELOCITY_YAW_RATE
 from link.signing import Key, Streams, Verdict, advance, enable, sim_stamp
+from link.wire import MAVLINK_VERSION
 
 mav = dialect.load()
 
@@ -25,7 +27,6 @@ TELEOP_PERIOD = 0.1  # s: teleop is streamed at 10 Hz
 TRANSFER_TIMEOUT = 1.5
 TRANSFER_TRIES = 4
 STOPPED = ("velocity", 0.0, 0.0, math.nan)  # the teleop stream of a station holding still (zero velocity)
-MAVLINK_VERSION = 3  # HEARTBEAT.mavlink_version (what pymavlink's heartbeat_send fills in)
 _UNRESOLVED = object()  # a message type whose handler has not been looked up yet
 # the dialect's message types that carry a target_system, by name: most of the vehicle's telemetry does not, and
 # asking each of those frames for the field would cost a failed attribute lookup per frame
@@ -271,7 +272,7 @@ class GroundStation:
         if kind == "manual":
             self.mav.send(mav.MAVLink_manual_control_message(self.target, int(a * 1000), 0, 500, int(b * 1000), 0))
         else:
-            mask = 0b0000_1101_1100_0111 if math.isnan(c) else 0b0000_0101_1100_0111
+            mask = VELOCITY if math.isnan(c) else VELOCITY_YAW_RATE
             self.mav.send(mav.MAVLink_set_position_target_local_ned_message(
                 0, self.target, self.target_comp, mav.MAV_FRAME_LOCAL_NED, mask, 0, 0, 0, a, b, 0, 0, 0, 0, 0,
                 0.0 if math.isnan(c) else c))

@@ -144,7 +144,7 @@ def _plan_spec(text: str) -> tuple:
     """``--plan 'rtl:50 | loiter:30 | launch'`` (the ``gcs`` plan syntax) as the scenario's return plan; every
     item is checked against the one table of plan-item ranges (``link.plan_items``) on the way."""
     from gcs.plans import PlanError, parse_spec
-    from vehicle.missions import Origin, to_plan
+    from vehicle.services.mission_transfer import Origin, to_plan
 
     try:
         return to_plan(tuple(parse_spec(text)), Origin())

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 from link.plan_items import KINDS
 from tests.harness import Pair
-from vehicle.mavlink import COMMANDS, Endpoint, mav
+from vehicle.mavlink import COMMANDS, HANDLED, mav
 from vehicle.params import SPECS
 
 OWNER = 255
@@ -63,7 +63,7 @@ class Generator:
         self.encoders: dict[int, object] = {}
         self.ids = list(MESSAGES)
         # half of the frames are messages the vehicle acts on, so hostile content reaches the handlers often
-        self.handled = [i for i, c in MESSAGES.items() if hasattr(Endpoint, f"_on_{c.msgname.lower()}")]
+        self.handled = [i for i, c in MESSAGES.items() if c.msgname in HANDLED]
         self.handled += [mav.MAVLINK_MSG_ID_COMMAND_LONG, mav.MAVLINK_MSG_ID_COMMAND_INT] * 4
 
     def _encoder(self, sysid: int):

@@ -305,12 +305,16 @@ def test_a_lease_change_is_reported_in_the_tick_it_happens():
 
 
 def test_every_handler_is_routed_and_targets_are_checked_from_the_table():
-    """``Endpoint.handle`` takes each type's handler and target fields from ``ROUTES``, not from probing the
-    message: every ``_on_`` method must be reachable, and the table must judge targets as the fields say."""
-    from vehicle.mavlink import ROUTES, Endpoint
+    """``Endpoint.handle`` takes each type's handler and target fields from its routes, not from probing the
+    message: every message type a composed service declares must reach that service, and the table must judge
+    targets as the fields say."""
+    from vehicle.mavlink import HANDLED
 
-    assert {r.handler for r in ROUTES.values() if r.handler} == {n for n in dir(Endpoint) if n.startswith("_on_")}
     pair = Pair()
+    declared = {kind: s for s in pair.endpoint.services for kind in type(s).MESSAGES}
+    assert set(declared) == HANDLED
+    assert all(pair.endpoint.owner(kind) is s for kind, s in declared.items())
+    assert pair.endpoint.owner("HEARTBEAT") is None and pair.endpoint.owner("ATTITUDE") is None
     pair.connect()
     enc = mav.MAVLink(None, 255, 190)
     c = pair.endpoint.counters

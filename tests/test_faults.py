@@ -53,13 +53,15 @@ def test_a_fault_when_the_service_starts_is_contained_the_same_way(monkeypatch):
 
 
 def test_a_fault_in_a_message_handler_is_counted_reported_and_not_fatal(monkeypatch):
+    from vehicle.services.params import ParamServer
+
     pair = Pair()
     pair.connect()
 
-    def broken(self, m, sender, scomp, t):
+    def broken(self, index):
         raise RuntimeError("handler broke")
 
-    monkeypatch.setattr(type(pair.endpoint), "_on_param_request_list", broken)
+    monkeypatch.setattr(ParamServer, "value", broken)  # what the PARAM_REQUEST_LIST handler sends each value with
     pair.gs.param_request_all()
     pair.step(0.2)
     assert pair.endpoint.counters.handler_faults == 1
@@ -70,15 +72,15 @@ def test_a_fault_in_a_message_handler_is_counted_reported_and_not_fatal(monkeypa
 
 
 def test_a_fault_in_a_command_handler_is_answered_failed_once(monkeypatch):
-    from vehicle import mavlink
+    from vehicle.services.telemetry import Telemetry
 
     pair = Pair()
     pair.connect()
 
-    def broken(self, p, sender, scomp, t):
+    def broken(self, msgid, t):
         raise RuntimeError("command broke")
 
-    monkeypatch.setitem(mavlink.COMMANDS, mav.MAV_CMD_GET_HOME_POSITION, broken)
+    monkeypatch.setattr(Telemetry, "emit", broken)  # what the GET_HOME_POSITION handler sends HOME_POSITION with
     p = pair.gs.command(mav.MAV_CMD_GET_HOME_POSITION)
     pair.until(lambda: p.done, 2, "COMMAND_ACK")
     assert p.result == mav.MAV_RESULT_FAILED

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from tests.harness import Pair
 from vehicle.app import State
-from vehicle.telemetry import Telemetry
+from vehicle.services.telemetry import Telemetry
 
 
 def story(pair: Pair) -> list[bytes]:
@@ -57,7 +57,8 @@ def test_message_classes_take_the_defaults_of_the_send_methods():
     import inspect
 
     from link import dialect
-    from vehicle.telemetry import BUILDERS, MAVLINK_VERSION
+    from link.wire import MAVLINK_VERSION
+    from vehicle.services.telemetry import BUILDERS
 
     mav = dialect.load()
     for msgid in BUILDERS:

@@ -1,8 +1,9 @@
-"""The vehicle side of the MAVLink mission protocol, for mission types 0 (the return plan), 1 (fence) and 2 (rally).
+"""The vehicle side of the MAVLink mission transfer, for mission types 0 (the return plan), 1 (fence) and 2 (rally).
 
 Uploads are transactions: the vehicle requests every item with MISSION_REQUEST_INT, re-requests on a timeout, and
 only when the last item has arrived and the whole list is accepted does it replace the stored list. A cancelled,
-timed-out or refused upload leaves the previous plan exactly as it was. Errors are MISSION_ACK codes.
+timed-out or refused upload leaves the previous plan exactly as it was. Errors are MISSION_ACK codes. What the
+lists mean (a return plan to schedule) is the mission service's business (``vehicle.services.mission``).
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from link import dialect
 from link.mission import Item, Origin
 from link.plan_items import (
     GLOBAL_FRAMES,
@@ -29,9 +31,14 @@ ITEM_TIMEOUT = 0.5  # s before an item is requested again
 ITEM_RETRIES = 5
 MAX_ITEMS = 500
 
-# MAV_MISSION_RESULT
-ACCEPTED, ERROR, UNSUPPORTED_FRAME, UNSUPPORTED, NO_SPACE, INVALID = 0, 1, 2, 3, 4, 5
-INVALID_SEQUENCE, DENIED, OPERATION_CANCELLED = 13, 14, 15
+mav = dialect.load()
+
+# MAV_MISSION_RESULT, as the transfer answers
+ACCEPTED, UNSUPPORTED, NO_SPACE, INVALID = (mav.MAV_MISSION_ACCEPTED, mav.MAV_MISSION_UNSUPPORTED,
+                                            mav.MAV_MISSION_NO_SPACE, mav.MAV_MISSION_INVALID)
+INVALID_SEQUENCE, DENIED, OPERATION_CANCELLED = (mav.MAV_MISSION_INVALID_SEQUENCE, mav.MAV_MISSION_DENIED,
+                                                 mav.MAV_MISSION_OPERATION_CANCELLED)
+MISSION_TYPES = (mav.MAV_MISSION_TYPE_MISSION, mav.MAV_MISSION_TYPE_FENCE, mav.MAV_MISSION_TYPE_RALLY)
 
 
 def to_plan(items: tuple[Item, ...], origin: Origin) -> tuple[PlanItem, ...]:
@@ -82,7 +89,7 @@ class MissionServer:
                  accept: Callable[[int, tuple[Item, ...], int, int, float], tuple[int, str]]) -> None:
         self.send = send
         self.accept = accept
-        self.lists: dict[int, tuple[Item, ...]] = {0: (), 1: (), 2: ()}
+        self.lists: dict[int, tuple[Item, ...]] = {mt: () for mt in MISSION_TYPES}
         self.upload: _Upload | None = None
         self.uploads_cancelled = 0
 
@@ -125,7 +132,8 @@ class MissionServer:
         if item.seq > expected:
             self._request(up, t)  # out of order: ask again for the one we need
             return None
-        if up.mission_type == 0:  # a return-plan item is checked as it arrives: the ACK names the bad field
+        if up.mission_type == mav.MAV_MISSION_TYPE_MISSION:
+            # a return-plan item is checked as it arrives: the ACK names the bad field
             fault = check_item(item.command, item.frame, (item.param1, item.param2, item.param3, item.param4),
                                item.x, item.y, item.z, item.current, item.autocontinue)
             if fault is not None:
@@ -202,7 +210,7 @@ class MissionServer:
             self.send("mission_item", x=it.x / scale, y=it.y / scale, **fields)
 
     def on_clear(self, sysid: int, compid: int, mission_type: int, t: float, allowed: tuple[int, str]) -> str | None:
-        if mission_type == 255:  # MAV_MISSION_TYPE_ALL
+        if mission_type == mav.MAV_MISSION_TYPE_ALL:
             types = list(self.lists)
         elif mission_type in self.lists:
             types = [mission_type]

@@ -1,31 +1,26 @@
 """What the vehicle reports and when (DESIGN §4 telemetry): the heartbeat, position and attitude, health, home,
-mission progress, operator control and lease status, each at its own rate, some also on change.
+mission progress, operator control and lease status, each at its own rate, some also on change; and the commands
+that ask for telemetry (REQUEST_MESSAGE, GET_HOME_POSITION, REQUEST_AUTOPILOT_CAPABILITIES) or change its rates
+(SET_MESSAGE_INTERVAL, a state change only the owner may make).
 
-Positions come from the estimator, never from ground truth, because that is all a real vehicle knows.
+Positions come from the estimator, never from ground truth, because that is all a real vehicle knows. A companion
+computer composes the same service with its own identity (``mav_type``, ``autopilot``) and only the streams it
+owns (``rates``): its autopilot reports position and attitude itself.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
-from link import dialect
 from link.mission import Origin
+from link.wire import NO_INDEX
+from vehicle import modes
 from vehicle.app import State, Vehicle
 from vehicle.lease import Holder
-from vehicle.modes import AVAILABLE_MODES, custom_mode, standard_mode
+from vehicle.services.base import Outbox, Reply, Service, Source, boot_ms, command, mav, whole, wire_index
+from vehicle.services.heartbeat import MSG_ID_AVAILABLE_MODES, MSG_ID_CURRENT_MODE, Heartbeat
 
-mav = dialect.load()
-# AVAILABLE_MODES (435) and CURRENT_MODE (436) are standard messages of MAVLink's development.xml, which the
-# returnlink dialect (common.xml + lease messages) does not include: they are encoded with pymavlink's own
-# development module, so the dialect contract stays unchanged.
-from pymavlink.dialects.v20 import development as _modes_wire  # noqa: E402
-
-MSG_ID_AVAILABLE_MODES = _modes_wire.MAVLINK_MSG_ID_AVAILABLE_MODES
-MSG_ID_CURRENT_MODE = _modes_wire.MAVLINK_MSG_ID_CURRENT_MODE
-
-NO_INDEX = 65535
-MAVLINK_VERSION = 3  # HEARTBEAT.mavlink_version (what pymavlink's heartbeat_send fills in)
 HEALTH_SENSORS = (mav.MAV_SYS_STATUS_SENSOR_3D_GYRO | mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL
                   | mav.MAV_SYS_STATUS_SENSOR_3D_MAG | mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
                   | mav.MAV_SYS_STATUS_PREARM_CHECK)
@@ -35,6 +30,7 @@ CAPABILITIES = (mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mav.MAV_PROTOCOL_CAPAB
                 | mav.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
                 | mav.MAV_PROTOCOL_CAPABILITY_COMPONENT_ACCEPTS_GCS_CONTROL)
 
+HEARTBEAT_PERIOD = 1.0  # s
 # default telemetry intervals, s (changed with SET_MESSAGE_INTERVAL)
 DEFAULT_RATES = {
     mav.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
@@ -50,22 +46,27 @@ DEFAULT_RATES = {
 }
 
 
-class Telemetry:
-    """Scheduled and on-change reports through one encoder (``enc``: a pymavlink MAVLink instance).
+class Telemetry(Service):
+    """Scheduled and on-change reports of one component, through its outbox.
 
-    Each builder constructs pymavlink's message object and hands it to ``enc.send``, which is what the generated
-    ``<name>_send`` methods do after ``<name>_encode``, two calls and a keyword pass fewer per frame (the
-    defaults are the same: tests/test_telemetry_fast_paths.py)."""
+    Each builder constructs pymavlink's message object and hands it to the encoder's ``send``, which is what the
+    generated ``<name>_send`` methods do after ``<name>_encode`` (the defaults are the same:
+    tests/test_telemetry_fast_paths.py). ``rates`` are the streams sent unasked and their default intervals."""
 
-    def __init__(self, enc, vehicle: Vehicle, origin: Origin, boot_t: float, link_stats: Callable[[], tuple[int, int]],
-                 mission_count: Callable[[], int]) -> None:
-        self.mav = enc
+    def __init__(self, out: Outbox, vehicle: Vehicle, origin: Origin, boot_t: float,
+                 link_stats: Callable[[], tuple[int, int]], mission_count: Callable[[], int], *,
+                 mav_type: int | None = None, autopilot: int = mav.MAV_AUTOPILOT_GENERIC,
+                 rates: Mapping[int, float] = DEFAULT_RATES) -> None:
+        self.out = out
+        self.mav = out.mav
         self.vehicle = vehicle
         self.origin = origin
         self.boot_t = boot_t
         self.link_stats = link_stats  # (frames received, bad frames) for SYS_STATUS
         self.mission_count = mission_count
-        self.intervals = dict(DEFAULT_RATES)
+        self.heartbeat = Heartbeat(out.mav, vehicle, mav_type, autopilot)
+        self.rates = dict(rates)
+        self.intervals = dict(rates)
         self.due: dict[int, float] = {}
         self.next_due = boot_t  # earliest of ``due``: most ticks have nothing scheduled
         self.next_heartbeat = boot_t
@@ -76,7 +77,39 @@ class Telemetry:
         self._keys_from: tuple = (None,) * 8  # what the keys were last computed from (see _on_change)
 
     def boot_ms(self, t: float) -> int:
-        return int(max(0.0, t - self.boot_t) * 1000) & 0xFFFFFFFF
+        return boot_ms(t, self.boot_t)
+
+    # ----- the telemetry commands ----------------------------------------------------------------------------
+    @command(mav.MAV_CMD_REQUEST_MESSAGE)
+    def _request_message(self, p: tuple, src: Source, t: float) -> Reply:
+        """One message, once: a read, answered to anyone (it starts no stream here)."""
+        msgid = int(p[0])
+        if msgid == MSG_ID_AVAILABLE_MODES:  # param2: 0 every mode, else the 1-based index of one
+            index = whole(p[1])
+            ok = index is not None and self.heartbeat.available_modes(index)
+            return (mav.MAV_RESULT_ACCEPTED if ok else mav.MAV_RESULT_DENIED), 0
+        return (mav.MAV_RESULT_ACCEPTED if self.emit(msgid, t) else mav.MAV_RESULT_DENIED), 0
+
+    @command(mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES)
+    def _capabilities(self, p: tuple, src: Source, t: float) -> Reply:
+        self.emit(mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION, t)
+        return mav.MAV_RESULT_ACCEPTED, 0
+
+    @command(mav.MAV_CMD_GET_HOME_POSITION)
+    def _home_position(self, p: tuple, src: Source, t: float) -> Reply:
+        self.emit(mav.MAVLINK_MSG_ID_HOME_POSITION, t)
+        return mav.MAV_RESULT_ACCEPTED, 0
+
+    @command(mav.MAV_CMD_SET_MESSAGE_INTERVAL)
+    def _message_interval(self, p: tuple, src: Source, t: float) -> Reply:
+        """Telemetry rates are vehicle state shared by every station (DESIGN §3.9): only the owner changes
+        them; with nobody owning, any plain client may (MAVSDK and MAVProxy set intervals when they connect)."""
+        v = self.vehicle
+        if v.refuses(src.sysid):
+            self.out.statustext(f"message interval from {src.sysid} refused: GCS {v.book.owner} is in control",
+                                mav.MAV_SEVERITY_WARNING)
+            return mav.MAV_RESULT_DENIED, 0
+        return (mav.MAV_RESULT_ACCEPTED if self.set_interval(int(p[0]), p[1], t) else mav.MAV_RESULT_DENIED), 0
 
     def set_interval(self, msgid: int, interval_us: float, t: float) -> bool:
         """SET_MESSAGE_INTERVAL: -1 off, 0 default, else microseconds. False for what is not telemetry here."""
@@ -85,7 +118,7 @@ class Telemetry:
         if interval_us == -1:
             self.intervals[msgid] = math.inf
         elif interval_us == 0:
-            self.intervals[msgid] = DEFAULT_RATES.get(msgid, math.inf)
+            self.intervals[msgid] = self.rates.get(msgid, math.inf)
         elif interval_us > 0:
             self.intervals[msgid] = max(0.02, interval_us / 1e6)
         else:
@@ -97,8 +130,8 @@ class Telemetry:
     def tick(self, t: float) -> None:
         v = self.vehicle
         if t >= self.next_heartbeat:
-            self.next_heartbeat = t + 1.0
-            self._heartbeat(t)
+            self.next_heartbeat = t + HEARTBEAT_PERIOD
+            self.heartbeat.send(t)
         seen = self._seen
         c = v.contingency
         held = c is not None and c.holding
@@ -147,7 +180,7 @@ class Telemetry:
             self.due[mav.MAVLINK_MSG_ID_LEASE_STATUS] = t
             self.due[mav.MAVLINK_MSG_ID_MISSION_CURRENT] = t
             self.next_due = t
-        mode = custom_mode(status_key[-1], v.holding)  # teleop or hold can change it with no lease change
+        mode = modes.custom_mode(status_key[-1], v.holding)  # teleop or hold can change it with no lease change
         if mode != self.last_mode:
             self.last_mode = mode
             self._current_mode(t)
@@ -171,21 +204,10 @@ class Telemetry:
         return True
 
     def custom_mode(self) -> int:
-        return custom_mode(self.vehicle.state(), self.vehicle.holding)
+        return self.heartbeat.custom_mode()
 
     def _heartbeat(self, t: float) -> None:
-        v = self.vehicle
-        base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
-        if v.armed:
-            base |= mav.MAV_MODE_FLAG_SAFETY_ARMED
-        state = v.state()
-        if state == State.TELEOP:
-            base |= mav.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
-        elif state in (State.RETURNING, State.NAVIGATING):
-            base |= mav.MAV_MODE_FLAG_AUTO_ENABLED
-        system_status = mav.MAV_STATE_ACTIVE if v.armed else mav.MAV_STATE_STANDBY
-        self.mav.send(mav.MAVLink_heartbeat_message(v.driver.mav_type, mav.MAV_AUTOPILOT_GENERIC, base,
-                                                    self.custom_mode(), system_status, MAVLINK_VERSION))
+        self.heartbeat.send(t)
 
     def _sys_status(self, t: float) -> None:
         v = self.vehicle
@@ -264,20 +286,7 @@ class Telemetry:
         self.mav.send(mav.MAVLink_mission_current_message(max(0, seq), total, state))
 
     def _current_mode(self, t: float) -> None:
-        """CURRENT_MODE: sent on every mode change and on request (standard modes microservice)."""
-        mode = self.custom_mode()
-        self.mav.send(_modes_wire.MAVLink_current_mode_message(standard_mode(mode), mode, 0))
-
-    def available_modes(self, index: int) -> bool:
-        """AVAILABLE_MODES for mode ``index`` (1-based), or every mode for 0; False for an index out of range."""
-        n = len(AVAILABLE_MODES)
-        if not 0 <= index <= n:
-            return False
-        for k in range(1, n + 1) if index == 0 else (index,):
-            m = AVAILABLE_MODES[k - 1]
-            self.mav.send(_modes_wire.MAVLink_available_modes_message(n, k, m.standard, m.custom, 0,
-                                                                      m.name.encode()))
-        return True
+        self.heartbeat.current_mode(t)
 
     def _control_status(self, t: float) -> None:
         b = self.vehicle.book
@@ -322,7 +331,3 @@ BUILDERS: dict[int, Callable[[Telemetry, float], None]] = {
     MSG_ID_CURRENT_MODE: Telemetry._current_mode,
 }
 
-
-def wire_index(i: int | None) -> int:
-    """A lease index on the wire: 65535 for none."""
-    return NO_INDEX if i is None else i
