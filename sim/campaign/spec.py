@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from sim.campaign.trial import Trial
-from sim.policies import DEFAULT_POLICY, POLICY_NAMES
+from sim.policies import DEFAULT_POLICY, FIRMWARE_VEHICLE, POLICY_NAMES, flies
 from sim.scenario import BUILTIN, ScenarioError, parse
 from vehicle.params import BY_NAME, ParamError, validate
 
@@ -35,7 +35,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-VEHICLES = ("rover", "legged")
+VEHICLES = ("rover", "legged", "ardurover")  # ardurover: the real ArduPilot firmware (DESIGN §10)
 FIELDS = ("scenarios", "vehicles", "seeds", "params", "policies", "timeout_s")
 MAX_TRIALS = 1_000_000  # a typo such as seeds = {from = 1, to = 1e9} is refused before it fills a disk
 DEFAULT_TIMEOUT_S = 600.0
@@ -202,6 +202,17 @@ def parse_spec(text: str, file: str = "<spec>", spec_dir: Path | None = None) ->
     for k, p in enumerate(policies):
         if p not in POLICY_NAMES:
             raise r.fail(f"policies[{k}]", f"unknown policy {p!r} (known: {', '.join(POLICY_NAMES)})")
+    # the grid pairs each policy with the vehicles that can fly it (the firmware's failsafes with the firmware, the
+    # native policies with the native robots), so one spec compares both; a policy no listed vehicle flies is an
+    # error, as is a vehicle no listed policy suits
+    listed = vehicles or [parse(text_, source).vehicle for _, source, text_ in scenarios]
+    for k, p in enumerate(policies):
+        if not any(flies(p, veh) for veh in listed):
+            need = f"vehicle {FIRMWARE_VEHICLE!r}" if not flies(p, "rover") else "a native vehicle (rover, legged)"
+            raise r.fail(f"policies[{k}]", f"policy {p!r} needs {need} in vehicles")
+    for k, veh in enumerate(vehicles or []):
+        if not any(flies(p, veh) for p in policies):
+            raise r.fail(f"vehicles[{k}]", f"no listed policy can be flown by vehicle {veh!r}")
     timeout = raw.get("timeout_s", DEFAULT_TIMEOUT_S)
     if not _number(timeout) or timeout <= 0:
         raise r.fail("timeout_s", f"must be a positive number of wall-clock seconds, got {timeout!r}")
@@ -216,6 +227,8 @@ def parse_spec(text: str, file: str = "<spec>", spec_dir: Path | None = None) ->
             for seed in seeds or [own.seed]:
                 for combo in combos:
                     for policy in policies:
+                        if not flies(policy, veh):
+                            continue
                         t = Trial(name, source, text_, veh, seed, tuple(sorted(combo)), policy)
                         trials.setdefault(t.id, t)
     return Spec(file, tuple(trials.values()), float(timeout))

@@ -33,7 +33,7 @@ INPUTS = [("trial_id", pa.string()), ("scenario", pa.string()), ("source", pa.st
           ("scenario_text", pa.string()), ("vehicle", pa.string()), ("seed", pa.int64()),
           ("params", pa.string()), ("policy", pa.string())]
 # every metric of DESIGN §7 (scenario, vehicle, seed and policy are the inputs above); nested ones as JSON text
-JSON_METRICS = ("lease_events", "failures", "loss_position", "rest_position", "blocks")
+JSON_METRICS = ("lease_events", "failures", "loss_position", "rest_position", "blocks", "firmware_modes")
 METRICS = [("sim_duration_s", pa.float64()), ("link_lost_s", pa.float64()), ("return_started_s", pa.float64()),
            ("reaction_latency_s", pa.float64()), ("link_regained_s", pa.float64()),
            ("distance_back_m", pa.float64()), ("max_displacement_m", pa.float64()),
@@ -43,7 +43,9 @@ METRICS = [("sim_duration_s", pa.float64()), ("link_lost_s", pa.float64()), ("re
            ("real_time_factor", pa.float64()), ("lease_events", pa.string()), ("passed", pa.bool_()),
            ("failures", pa.string()), ("loss_position", pa.string()), ("rest_position", pa.string()),
            ("rest_link_quality", pa.float64()), ("link_cycles", pa.int64()), ("regained_by", pa.string()),
-           ("collisions_during_return", pa.int64()), ("return_speed_mps", pa.float64()), ("blocks", pa.string())]
+           ("collisions_during_return", pa.int64()), ("return_speed_mps", pa.float64()), ("blocks", pa.string()),
+           # vehicle ardurover only (DESIGN §10): the firmware's version and its mode timeline
+           ("firmware", pa.string()), ("firmware_modes", pa.string())]
 OUTCOME = [("status", pa.string()), ("error", pa.string()), ("cpu_s", pa.float64())]
 SCHEMA = pa.schema(INPUTS + METRICS + OUTCOME)
 FINISHED = ("ok", "failed")

@@ -12,9 +12,9 @@ import hashlib
 import json
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
-from sim.policies import DEFAULT_POLICY
+from sim.policies import DEFAULT_POLICY, FIRMWARE_VEHICLE
 
 
 @dataclass(frozen=True)
@@ -29,6 +29,9 @@ class Trial:
     seed: int
     params: tuple[tuple[str, float], ...] = ()
     policy: str = DEFAULT_POLICY
+    # the firmware binary for vehicle ardurover: where it lives on this machine, not what the trial is, so it is
+    # neither hashed nor stored (empty: found again by RETURNLINK_ARDUROVER or PATH where the trial runs)
+    firmware: str = field(default="", compare=False)
 
     @property
     def id(self) -> str:
@@ -55,11 +58,19 @@ def scenario_of(trial: Trial):
 
 def simulate(trial: Trial, progress: bool = False):
     """Run the trial's simulation and compute its metrics: the ``Run`` (for plots) with ``run.metrics`` set."""
-    from sim import metrics
-    from sim.runner import Run
+    from sim import outputs
 
-    run = Run(scenario_of(trial), trial.vehicle, trial.seed, progress=progress, policy=trial.policy).run()
-    run.metrics = metrics.compute(run)
+    if trial.vehicle == FIRMWARE_VEHICLE:
+        from sim.firmware.locate import find_firmware
+        from sim.firmware.run import FirmwareRun
+
+        run = FirmwareRun(scenario_of(trial), trial.seed, trial.policy, find_firmware(trial.firmware or None),
+                          progress=progress).run()
+    else:
+        from sim.runner import Run
+
+        run = Run(scenario_of(trial), trial.vehicle, trial.seed, progress=progress, policy=trial.policy).run()
+    run.metrics = outputs.compute(run)
     return run
 
 
