@@ -345,11 +345,54 @@ def _add_run_campaign_options(run) -> None:
     run.add_argument("--no-plots", action="store_true", help="skip trajectory.png and timeline.png")
 
 
+def _cmd_sim_serve_firmware(args: argparse.Namespace, sc) -> int:
+    """`sim serve --vehicle ardurover`: the firmware, paced by itself, behind the radio proxy."""
+    from sim.firmware.process import FirmwareError, stop_on_terminate
+    from sim.firmware.report import trajectory
+    from sim.firmware.serve import FirmwareServer
+
+    policy = _policy_for(args, "ardurover")
+    firmware = _firmware(args.firmware)
+    for flag in ("params", "key", "state"):
+        if getattr(args, flag):
+            raise _fail(f"--{flag} configures returnlink's own vehicle; the ArduPilot firmware keeps its parameters "
+                        "and signing in itself (set them over MAVLink)")
+    out = Path(args.out) if args.out else Path("out") / f"serve-{sc.name}-ardurover"
+    _writable_dir(out)
+    peers = tuple(args.peer) if args.peer else (("127.0.0.1", 14550), ("127.0.0.1", 14540))
+    try:
+        server = FirmwareServer(sc, args.seed, policy, firmware, args.port, peers, args.perfect_link, args.speedup,
+                                args.duration, log_path=out / "firmware.log")
+    except OSError as e:
+        print(f"returnlink: error: cannot bind 127.0.0.1:{args.port}: {e}", file=sys.stderr)
+        return 2
+    host, port = server.address
+    print(f"returnlink: {sc.name} with the ArduPilot firmware ({firmware}, policy {policy}) on udp {host}:{port}, "
+          "sending to " + ", ".join(f"{h}:{p}" for h, p in peers)
+          + ("" if args.perfect_link else ", through the radio model"), file=sys.stderr, flush=True)
+    try:
+        with stop_on_terminate():
+            server.run()
+    except FirmwareError as e:
+        print(f"returnlink: the firmware failed: {e}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("returnlink: stopped; the firmware was stopped", file=sys.stderr)
+    if server.rows:
+        print(f"returnlink: wrote {trajectory(server, out / 'trajectory.png')}", file=sys.stderr)
+    return 0
+
+
 def _cmd_sim_serve(args: argparse.Namespace) -> int:
+    from sim.policies import FIRMWARE_VEHICLE
     from sim.serve import Server
     from vehicle.storage import StoredFileError
 
     sc = _scenario(args.scenario)
+    if args.vehicle == FIRMWARE_VEHICLE:
+        return _cmd_sim_serve_firmware(args, sc)
+    if args.policy or args.firmware:
+        raise _fail("--policy and --firmware go with --vehicle ardurover (the native vehicle flies its own plan)")
     params = _parm_file(args.params)
     if args.out:
         _writable_dir(Path(args.out))  # the plot is written on exit: know now that it can be
@@ -423,7 +466,7 @@ def _cmd_keys(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from sim.policies import DEFAULT_POLICY, POLICY_NAMES
+    from sim.policies import DEFAULT_POLICY, FIRMWARE_POLICIES, POLICY_NAMES
 
     p = argparse.ArgumentParser(
         prog="returnlink", description="Lease-based automated return to link for MAVLink robots.")
@@ -452,7 +495,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sweep_parser(sim)
     serve = sim.add_parser("serve", help="run a scenario in real time over UDP for MAVSDK, MAVProxy, QGC")
     serve.add_argument("scenario", help="a built-in scenario name or a .toml file")
-    serve.add_argument("--vehicle", choices=["rover", "legged"], help="robot model (default: the scenario's)")
+    serve.add_argument("--vehicle", choices=["rover", "legged", "ardurover"],
+                       help="robot model (default: the scenario's); ardurover: the real ArduPilot firmware")
+    serve.add_argument("--policy", choices=FIRMWARE_POLICIES,
+                       help="with --vehicle ardurover: its GCS failsafe (default ardupilot-smartrtl)")
+    _add_firmware_option(serve)
     serve.add_argument("--seed", type=types.SEED)
     serve.add_argument("--speedup", type=types.SPEEDUP, default=1.0, help="run K times faster than real time")
     serve.add_argument("--port", type=types.LISTEN_PORT, default=14580, help="UDP port the vehicle listens on")

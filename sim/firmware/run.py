@@ -144,6 +144,7 @@ class FirmwareRun:
     process is stopped when it ends, raises, or is interrupted."""
 
     kind = "ardurover"
+    speedup = SPEEDUP  # the firmware's own pace; lockstep runs leave the pace to the bridge
 
     def __init__(self, scenario: Scenario, seed: int | None = None, policy: str = "ardupilot-smartrtl",
                  firmware: Path | None = None, progress: bool = False, duration: float | None = None,
@@ -218,9 +219,9 @@ class FirmwareRun:
         # (Tools/autotest/default_params/rover.parm, copied next to it); ours go on top
         beside = self.firmware.with_name("rover.parm")
         files = f"{beside},{defaults}" if beside.is_file() else str(defaults)
-        proc.args = ["--model", "JSON", "--rate", str(RATE), "--speedup", str(SPEEDUP), "-w", "--defaults", files,
-                     "--serial0", f"udpclient:127.0.0.1:{fw_port}",
-                     "--home", home, "--sysid", "1"]
+        proc.args = ["--model", "JSON", "--rate", str(RATE), "--speedup", f"{self.speedup:g}", "-w",
+                     "--defaults", files, "--serial0", f"udpclient:127.0.0.1:{fw_port}", "--home", home,
+                     "--sysid", "1"]
         self.process = proc.start()
 
     def _close(self) -> None:
@@ -338,7 +339,6 @@ class FirmwareRun:
         return apm.MAVLink_command_long_message(1, 1, apm.MAV_CMD_DO_SEND_BANNER, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav)
 
     def _loop(self) -> None:
-        n = int(round(self.duration / DT))
         tty = sys.stderr.isatty()
         shown = [-1]
         boot = self.boot_s
@@ -356,7 +356,7 @@ class FirmwareRun:
                 print(f"\r  [{bar}] {pct:3d}%  t={t:6.1f} s  {MODE_NAMES.get(self.tap.mode, '?'):<10}",
                       end="" if tty else "\n", file=sys.stderr, flush=True)
 
-        while not self.stopped and self.t < n * DT - 1e-9:
+        while not self.stopped and self.t < self.duration - 1e-9:
             self._frames(self.t_fw + DT, tick)
         if self.progress and tty:
             print(file=sys.stderr)
