@@ -7,6 +7,7 @@ import json
 import math
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -20,8 +21,9 @@ from sim.campaign.executors import SerialExecutor
 from sim.campaign.spec import parse_spec
 from sim.cli import main
 from sim.firmware import metrics
+from sim.firmware.bridge import MAGIC, SERVO_PACKET, Verdict
 from sim.firmware.metrics import TOLERANCE
-from sim.firmware.process import wait_for
+from sim.firmware.process import FirmwareError, wait_for
 from sim.firmware.run import FirmwareRun
 from sim.scenario import load
 from tests.firmware_helpers import firmware_or_skip, short_scenario
@@ -195,3 +197,31 @@ def test_sim_run_writes_its_outputs_and_a_sweep_puts_firmware_rows_beside_native
     out, err = capsys.readouterr()
     assert rc in (0, 1)
     assert "metrics match the stored trial within" in out or "did not repeat the stored trial exactly" in err
+
+
+class Injecting(FirmwareRun):
+    """A run into whose bridge socket a stranger sends ``packet`` once, 1 s into the scenario."""
+
+    packet = b""
+
+    def _tick(self, t: float) -> None:
+        if abs(t - 1.0) < 1e-6:
+            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            s.sendto(self.packet, self.json_sock.getsockname())
+            s.close()
+        super()._tick(t)
+
+
+def test_a_malformed_packet_on_the_bridge_is_counted_and_ignored(firmware):
+    run = type("Garbage", (Injecting,), {"packet": b"\x00garbage, not a servo packet"})(
+        load("tunnel"), 1, "ardupilot-hold", firmware, duration=5.0).run()
+    assert run.rules.counts[Verdict.MALFORMED] == 1
+    assert len(run.rows) == 250 and not run.process.alive()
+
+
+def test_a_frame_counter_that_goes_back_ends_the_run_and_its_firmware(firmware):
+    run = type("Restart", (Injecting,), {"packet": SERVO_PACKET.pack(MAGIC, 200, 0, *([1500] * 16))})(
+        load("tunnel"), 1, "ardupilot-hold", firmware, duration=5.0)
+    with pytest.raises(FirmwareError, match="restarted"):
+        run.run()
+    assert not run.process.alive()
