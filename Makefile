@@ -5,6 +5,10 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 # the map test drives Debian's chromium (root in CI; sudo on a developer's machine)
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+# the ArduPilot Rover SITL for the firmware tests and benchmark: RETURNLINK_ARDUROVER if set, else the one shared
+# beside this checkout, if any (none: the firmware tests skip and say so; .ci/run always sets it)
+RETURNLINK_ARDUROVER ?= $(abspath $(wildcard ../shared/ardupilot/ardurover))
+export RETURNLINK_ARDUROVER
 
 .PHONY: demo test bench fuzz lint venv clean
 
