@@ -69,7 +69,9 @@ def test_skid_steering_from_servo_functions_73_and_74():
     pwm = [1500] * 16
     pwm[0], pwm[2] = 2000, 1000  # left forward, right backward: turn right on the spot
     speed, rate = m.command(tuple(pwm), 0.0)
-    assert speed == pytest.approx(0.0) and rate > 0
+    assert speed == pytest.approx(0.0) and rate == pytest.approx(math.radians(140))  # the SITL skid turn rate
+    pwm[2] = 2000  # both sides forward: straight on at top speed
+    assert m.command(tuple(pwm), 0.0) == pytest.approx((2.0, 0.0))
     with pytest.raises(ValueError, match="neither"):
         ServoMap(2.0, {1: 33, 3: 34})
 

@@ -10,10 +10,12 @@ Lockstep, the physics owns time: each new frame is one physics step of 1/frame_r
 restarted. Anything else that arrives on the socket is malformed: counted and never answered.
 
 PWM becomes the rover's (speed, yaw rate) command through the functions the firmware assigned its outputs
-(SERVOn_FUNCTION): ground steering (26) and throttle (70), as in ArduPilot's own SITL rover, or skid steering
-(73 throttle left, 74 throttle right). Throttle ±100 % is the rover's ±max speed; steering follows the SITL rover's
-car geometry (its 1.8 m turning circle at 35° wheel turn), so the firmware's steering controller, tuned on that
-model, meets the kinematics it expects; the scenario rover's own limits still apply on top.
+(SERVOn_FUNCTION, as the firmware reports them): skid steering (73 throttle left, 74 throttle right), which is
+what the scenario's differential-drive rover is and what a firmware run configures, or ground steering (26) and
+throttle (70), ArduPilot's own SITL car. Throttle ±100 % is the rover's ±max speed. Turning follows ArduPilot's
+SITL rover model, whose tuning the firmware's controllers are used to: full differential turns at its skid turn
+rate (140°/s); a steered car turns at speed over its radius (a 1.8 m turning circle at 35° wheel turn). The
+scenario rover's own limits (top speed, turn rate, accelerations) still apply on top.
 """
 
 from __future__ import annotations
@@ -31,11 +33,12 @@ GRAVITY = 9.80665
 # ArduPilot SRV_Channel functions this bridge understands
 STEERING, THROTTLE, THROTTLE_LEFT, THROTTLE_RIGHT = 26, 70, 73, 74
 DEFAULT_FUNCTIONS = {1: STEERING, 3: THROTTLE}  # SERVO1_FUNCTION, SERVO3_FUNCTION of ArduPilot's SITL rover
+SKID_FUNCTIONS = {1: THROTTLE_LEFT, 3: THROTTLE_RIGHT}  # what a firmware run sets: the scenario rover is skid-steered
 
 # the SITL rover's geometry (its turning circle at full lock, and that lock)
 TURNING_CIRCLE_M = 1.8
 MAX_WHEEL_TURN = math.radians(35.0)
-SKID_TRACK_M = 0.5  # wheel track used for skid steering
+SKID_TURN_RATE = math.radians(140.0)  # the SITL rover's turn rate at full differential
 
 
 @dataclass(frozen=True)
@@ -108,9 +111,9 @@ class ServoMap:
     def command(self, pwm: tuple[int, ...], speed_now: float) -> tuple[float, float]:
         ix = self._index
         if self.skid:
-            left = _unit(pwm[ix[THROTTLE_LEFT]]) * self.max_speed
-            right = _unit(pwm[ix[THROTTLE_RIGHT]]) * self.max_speed
-            return (left + right) / 2, (left - right) / SKID_TRACK_M  # FRD: right wheel slower turns right
+            left, right = _unit(pwm[ix[THROTTLE_LEFT]]), _unit(pwm[ix[THROTTLE_RIGHT]])
+            # FRD: the left side faster than the right turns right (positive yaw rate)
+            return (left + right) / 2 * self.max_speed, (left - right) / 2 * SKID_TURN_RATE
         throttle = _unit(pwm[ix[THROTTLE]])
         steer = _unit(pwm[ix[STEERING]])
         # a car turns at speed / radius; the radius at a given lock follows the SITL rover's geometry

@@ -35,7 +35,7 @@ from pymavlink.dialects.v20 import ardupilotmega as apm
 from link.proxy import RadioReport
 from link.radio import LinkState, Radio, subsystem_rng
 from link.transports import LockstepBus
-from sim.firmware.bridge import FrameRules, ServoMap, Verdict, parse_servo, state_reply
+from sim.firmware.bridge import SKID_FUNCTIONS, FrameRules, ServoMap, Verdict, parse_servo, state_reply
 from sim.firmware.operator import GCS_COMPID, RETURN_MODES, FirmwareOperator
 from sim.firmware.process import FirmwareError, FirmwareProcess, claim_instance
 from sim.robots import make_robot
@@ -47,6 +47,7 @@ RATE = 200  # the firmware's physics frame rate (--rate): below about 65 Hz its 
 SPEEDUP = 1000  # far beyond what the lockstep reaches: the bridge, not the firmware's clock, sets the pace
 BOOT_LIMIT_S = 120.0  # simulated seconds the firmware gets to boot and find its home
 RECV_TIMEOUT_S = 10.0  # wall seconds without a servo packet before the firmware counts as hung
+SERVO_CHANNELS = 4  # outputs whose function the bridge reads at boot (a rover's steering and throttle are among them)
 TAP_SYSID, TAP_COMPID = 200, 240  # the runner's own voice at boot: outside [MAV_GCS_SYSID, MAV_GCS_SYSID_HI]
 HOME = (-35.3632621, 149.1652374, 584.0)  # ArduPilot's SITL home (CMAC); world (0, 0) lies here
 
@@ -65,9 +66,14 @@ def firmware_params(policy: str, lnk_timeout: float, max_speed: float) -> dict[s
     - FS_THR_ENABLE 0: nobody holds an RC transmitter here, and its radio failsafe would fire at once;
     - CRUISE_SPEED/CRUISE_THROTTLE matching the bridge's throttle scale (full throttle = the rover's top speed), so
       the speed controller's feed-forward is right from the start;
-    - WP_RADIUS 1 m: a GUIDED position target counts as reached where the scripted operator moves on."""
+    - WP_RADIUS 1 m: a GUIDED position target counts as reached where the scripted operator moves on;
+    - skid steering (SERVO1_FUNCTION 73, SERVO3_FUNCTION 74): the scenario's rover is a differential drive that
+      turns on the spot, as the native vehicle's is, so only the autopilot differs between the two (as a car, the
+      firmware had to drive forward to turn round and wedged itself in the 3.6 m culvert)."""
+    servos = {f"SERVO{ch}_FUNCTION": fn for ch, fn in SKID_FUNCTIONS.items()}
     return {"FS_GCS_ENABLE": 1, "FS_ACTION": FS_ACTION[policy], "FS_GCS_TIMEOUT": max(2.0, lnk_timeout),
-            "FS_THR_ENABLE": 0, "CRUISE_SPEED": round(max_speed / 2, 3), "CRUISE_THROTTLE": 50, "WP_RADIUS": 1.0}
+            "FS_THR_ENABLE": 0, "CRUISE_SPEED": round(max_speed / 2, 3), "CRUISE_THROTTLE": 50, "WP_RADIUS": 1.0,
+            **servos}
 
 
 @dataclass
@@ -103,6 +109,7 @@ class Tap:
         self.estimate: tuple[float, float] | None = None  # LOCAL_POSITION_NED (north, east) from the EKF origin
         self.texts: list[tuple[float, str]] = []
         self.rejected = 0  # COMMAND_ACKs with a result other than ACCEPTED / IN_PROGRESS
+        self.servo_functions: dict[int, int] = {}  # output channel -> SERVOn_FUNCTION, as the firmware reports
 
     def frames(self, data: bytes, t: float) -> list[bytes]:
         """The MAVLink frames in one datagram, each noted; unparseable bytes are dropped (a radio would not carry
@@ -134,6 +141,10 @@ class Tap:
                 self.texts.append((t, text))
                 if self.version is None and text.startswith("ArduRover"):
                     self.version = text.strip()
+            elif kind == "PARAM_VALUE" and msg.param_id.startswith("SERVO") and msg.param_id.endswith("_FUNCTION"):
+                ch = msg.param_id[5:-9]
+                if ch.isdigit():
+                    self.servo_functions[int(ch)] = int(round(msg.param_value))
             elif kind == "COMMAND_ACK" and msg.result not in (apm.MAV_RESULT_ACCEPTED, apm.MAV_RESULT_IN_PROGRESS):
                 self.rejected += 1
         return out
@@ -316,27 +327,38 @@ class FirmwareRun:
         """Physics with the robot still until the firmware has a home, its EKF fuses GPS and its pre-arm checks
         pass (both are needed: the pre-arm bit was seen set while arming still failed on the AHRS), so scenario
         time starts with a firmware as ready as the native vehicle is at its boot. Its version is asked for once
-        (DO_SEND_BANNER, from a system id outside the GCS range, so it counts as no ground station)."""
+        (DO_SEND_BANNER, from a system id outside the GCS range, so it counts as no ground station), and so are the
+        functions of its outputs, from which the bridge maps PWM to the rover's speed and turn rate."""
         asked = []
 
         def listen(_t: float) -> None:
             self._drain(-1.0)
             if not asked and self._fw_addr is not None:
                 asked.append(True)
-                self.mav_sock.sendto(self._banner_request(), self._fw_addr)
+                for request in self._boot_requests():
+                    self.mav_sock.sendto(request, self._fw_addr)
 
-        while not (self.tap.home and self.tap.prearm_ok and self.tap.ekf_ok):
+        while not (self.tap.home and self.tap.prearm_ok and self.tap.ekf_ok
+                   and len(self.tap.servo_functions) == SERVO_CHANNELS):
             self._frames(self.t_fw + DT, listen)
             if self.t_fw > BOOT_LIMIT_S:
                 raise FirmwareError("the firmware found no home, no EKF position or failed its pre-arm checks for "
                                     f"{BOOT_LIMIT_S:g} simulated s; its last words:\n{self.process.log_tail()}")
+        try:
+            self.servo = ServoMap(self.robot.max_speed, self.tap.servo_functions)
+        except ValueError as e:
+            raise FirmwareError(f"the firmware's outputs cannot drive this rover: {e}") from None
         self.boot_s = self.t_fw
         self.tap.modes = [(0.0, self.tap.mode)] if self.tap.mode is not None else []
 
     @staticmethod
-    def _banner_request() -> bytes:
+    def _boot_requests() -> list[bytes]:
+        """Its version banner, and the functions of its first outputs (the bridge maps PWM by what they are)."""
         mav = apm.MAVLink(None, srcSystem=TAP_SYSID, srcComponent=TAP_COMPID)
-        return apm.MAVLink_command_long_message(1, 1, apm.MAV_CMD_DO_SEND_BANNER, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav)
+        out = [apm.MAVLink_command_long_message(1, 1, apm.MAV_CMD_DO_SEND_BANNER, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav)]
+        out += [apm.MAVLink_param_request_read_message(1, 1, f"SERVO{ch}_FUNCTION".encode(), -1).pack(mav)
+                for ch in range(1, SERVO_CHANNELS + 1)]
+        return out
 
     def _loop(self) -> None:
         tty = sys.stderr.isatty()
