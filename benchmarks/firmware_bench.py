@@ -36,14 +36,13 @@ def _child_cpu(pid: int) -> float:
 
 
 class Measured(FirmwareRun):
-    """The run, noting the firmware's CPU just before its process is stopped."""
+    """The run, noting the firmware's CPU at the end of the loop, before its process is stopped."""
 
     firmware_cpu = 0.0
 
-    def _close(self) -> None:
-        if self.process is not None and self.process.pid is not None:
-            self.firmware_cpu = _child_cpu(self.process.pid)
-        super()._close()
+    def _loop(self) -> None:
+        super()._loop()
+        self.firmware_cpu = _child_cpu(self.link.process.pid)
 
 
 def once(firmware: Path, minutes: float) -> dict:
@@ -51,9 +50,9 @@ def once(firmware: Path, minutes: float) -> dict:
     c0, w0 = time.process_time(), time.perf_counter()
     run = Measured(sc, 1, "ardupilot-smartrtl", firmware, duration=60 * minutes).run()
     wall, cpu = time.perf_counter() - w0, time.process_time() - c0
-    sim_s = run.t + run.boot_s
+    sim_s = run.t + run.link.boot_s
     return {"x": run.t / wall, "x_all": sim_s / wall, "wall": wall, "bridge_cpu": cpu,
-            "firmware_cpu": run.firmware_cpu, "boot_s": run.boot_s, "frames": sum(run.rules.counts.values())}
+            "firmware_cpu": run.firmware_cpu, "boot_s": run.link.boot_s, "frames": sum(run.link.rules.counts.values())}
 
 
 def main() -> int:

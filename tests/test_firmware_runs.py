@@ -131,9 +131,9 @@ def test_two_runs_side_by_side_claim_different_instances(firmware):
     for t in threads:
         t.join(120)
     assert not errors
-    assert got[1].process.instance != got[2].process.instance
+    assert got[1].link.process.instance != got[2].link.process.instance
     assert all(len(r.rows) == 1500 for r in got.values())
-    assert not any(r.process.alive() for r in got.values())
+    assert not any(r.link.process.alive() for r in got.values())
 
 
 def _children(pid: int) -> list[int]:
@@ -207,7 +207,7 @@ class Injecting(FirmwareRun):
     def _tick(self, t: float) -> None:
         if abs(t - 1.0) < 1e-6:
             s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            s.sendto(self.packet, self.json_sock.getsockname())
+            s.sendto(self.packet, self.link.json_sock.getsockname())
             s.close()
         super()._tick(t)
 
@@ -215,8 +215,8 @@ class Injecting(FirmwareRun):
 def test_a_malformed_packet_on_the_bridge_is_counted_and_ignored(firmware):
     run = type("Garbage", (Injecting,), {"packet": b"\x00garbage, not a servo packet"})(
         load("tunnel"), 1, "ardupilot-hold", firmware, duration=5.0).run()
-    assert run.rules.counts[Verdict.MALFORMED] == 1
-    assert len(run.rows) == 250 and not run.process.alive()
+    assert run.link.rules.counts[Verdict.MALFORMED] == 1
+    assert len(run.rows) == 250 and not run.link.process.alive()
 
 
 def test_a_frame_counter_that_goes_back_ends_the_run_and_its_firmware(firmware):
@@ -224,4 +224,4 @@ def test_a_frame_counter_that_goes_back_ends_the_run_and_its_firmware(firmware):
         load("tunnel"), 1, "ardupilot-hold", firmware, duration=5.0)
     with pytest.raises(FirmwareError, match="restarted"):
         run.run()
-    assert not run.process.alive()
+    assert not run.link.process.alive()

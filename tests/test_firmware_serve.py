@@ -47,5 +47,5 @@ def test_a_plain_ground_station_hears_and_commands_the_served_firmware():
         gcs.close()
     assert seen["heartbeat"].autopilot == apm.MAV_AUTOPILOT_ARDUPILOTMEGA
     assert seen["ack"].result == apm.MAV_RESULT_ACCEPTED
-    assert not thread.is_alive() and not server.process.alive()
-    assert server.rows and server.tap.version.startswith("ArduRover")
+    assert not thread.is_alive() and not server.link.process.alive()
+    assert server.rows and server.link.tap.version.startswith("ArduRover")

@@ -23,7 +23,8 @@ from __future__ import annotations
 import bisect
 import math
 
-from sim.firmware.run import MODE_NAMES, FirmwareRun
+from sim.firmware.lockstep import MODE_NAMES
+from sim.firmware.run import FirmwareRun
 from sim.metrics import FRAMES, KEYS, REGAIN_MOVED_M, _point, _r
 from vehicle.link_watch import GOOD_QUALITY as GOOD_LINK_QUALITY
 
@@ -38,7 +39,7 @@ def episodes(run: FirmwareRun) -> list[tuple[float, float | None, int]]:
     out: list[tuple[float, float | None, int]] = []
     asked = [t for t, text in run.operator.log if text == "rtl requested"]
     current: list | None = None
-    for t, mode in run.tap.modes:
+    for t, mode in run.link.tap.modes:
         if current is None and mode in RETURN_MODES and t > 0:
             if any(abs(t - a) < 2.0 for a in asked):
                 continue
@@ -122,7 +123,7 @@ def compute(run: FirmwareRun) -> dict:
         "reaction_latency_s": _r(first[0] - lost - timeout if first and lost is not None else None, 4),
         "link_regained_s": _r(regained), "distance_back_m": _r(distance, 2), "max_displacement_m": _r(max_disp, 2),
         "final_target_error_m": _r(final_err, 2), "collisions": run.world.collisions,
-        "stale_commands_executed": None, "commands_rejected": run.tap.rejected, "estimator_rmse_m": _r(rmse),
+        "stale_commands_executed": None, "commands_rejected": run.link.tap.rejected, "estimator_rmse_m": _r(rmse),
         "trail_points": None, "trail_max_deviation_m": None,
         "real_time_factor": _r(run.t / run.wall if run.wall > 0 else None, 1), "lease_events": [],
         "passed": True, "failures": [],
@@ -131,7 +132,7 @@ def compute(run: FirmwareRun) -> dict:
         "regained_by": regained_by, "collisions_during_return": collided,
         "return_speed_mps": _r(distance / driving if driving > 0 else None), "blocks": blocks,
         "frames": {**FRAMES, "final_target_error_m": "true (the firmware's home: where the rover armed)"},
-        "firmware": run.tap.version, "firmware_modes": run.firmware_modes,
+        "firmware": run.link.tap.version, "firmware_modes": run.firmware_modes,
     }
     m["failures"] = verdict(run, m)
     m["passed"] = not m["failures"]
@@ -165,7 +166,7 @@ def summary(run: FirmwareRun, m: dict) -> str:
 
     lines = [
         f"returnlink sim run {m['scenario']} --vehicle ardurover --seed {m['seed']} --policy {m['policy']}",
-        f"  firmware {m['firmware']} (booted in {run.boot_s:.1f} simulated s before scenario time 0)",
+        f"  firmware {m['firmware']} (booted in {run.link.boot_s:.1f} simulated s before scenario time 0)",
         f"  simulated {f(m['sim_duration_s'], ' s')} at {f(m['real_time_factor'], 'x real time')}",
         f"  link lost at {f(m['link_lost_s'], ' s')}, firmware return began {f(m['return_started_s'], ' s')}"
         f" (reaction {f(m['reaction_latency_s'], ' s', 3)} after LNK_TIMEOUT)",

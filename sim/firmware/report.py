@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.firmware.run import MODE_NAMES, FirmwareRun
+from sim.firmware.lockstep import MODE_NAMES
+from sim.firmware.run import FirmwareRun
 from sim.plots import draw_world, plt, save
 
 MODE_COLOURS = {"GUIDED": "tab:green", "HOLD": "tab:orange", "RTL": "tab:red", "SMART_RTL": "tab:blue",
@@ -51,7 +52,7 @@ def timeline(run: FirmwareRun, path: Path) -> Path:
     t = c["t"]
     fig, axes = plt.subplots(3, 1, figsize=(11, 7), sharex=True, gridspec_kw={"height_ratios": [1.4, 1, 1]})
     ax = axes[0]
-    seen = sorted({int(k) for k in c["mode"]} | {int(k) for _t, k in run.tap.modes})
+    seen = sorted({int(k) for k in c["mode"]} | {int(k) for _t, k in run.link.tap.modes})
     levels = {k: i for i, k in enumerate(seen)}
     ax.step(t, [levels[int(k)] for k in c["mode"]], where="post", color="tab:purple")
     ax.set_yticks(range(len(seen)), [MODE_NAMES.get(k, str(k)) for k in seen], fontsize=8)
@@ -79,6 +80,6 @@ def timeline(run: FirmwareRun, path: Path) -> Path:
     ax.plot(t, np.cumsum(step * returning), color="tab:blue")
     ax.set_ylabel("driven back (m)")
     ax.set_xlabel("simulated time since the firmware was ready (s)")
-    fig.suptitle(f"{run.scenario.name} (ArduPilot {run.tap.version}, seed {run.seed}, policy {run.policy})")
+    fig.suptitle(f"{run.scenario.name} (ArduPilot {run.link.tap.version}, seed {run.seed}, policy {run.policy})")
     return save(fig, path)
 

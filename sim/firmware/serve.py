@@ -25,8 +25,8 @@ class FirmwareServer(FirmwareRun):
                  peers: tuple[tuple[str, int], ...] = (("127.0.0.1", 14550), ("127.0.0.1", 14540)),
                  perfect_link: bool = False, speedup: float = 1.0, duration: float = math.inf,
                  log_path: Path | None = None, out=sys.stderr) -> None:
+        self.speedup = speedup  # before the firmware's link is made: it paces itself
         super().__init__(scenario, seed, policy, firmware, duration=duration, log_path=log_path)
-        self.speedup = speedup
         self.stations = {}  # nobody scripted: whoever connects is the ground station
         self.transport = UdpTransport(("127.0.0.1", port), peers)
         st = scenario.station(scenario.operator_station)
@@ -42,29 +42,32 @@ class FirmwareServer(FirmwareRun):
     def _boot(self) -> None:
         print("returnlink: the firmware is booting (its EKF needs a GPS fix first)...", file=self.out, flush=True)
         super()._boot()
-        print(f"returnlink: {self.tap.version} ready after {self.boot_s:.1f} simulated s", file=self.out, flush=True)
+        tap = self.link.tap
+        print(f"returnlink: {tap.version} ready after {self.link.boot_s:.1f} simulated s", file=self.out, flush=True)
 
     def _tick(self, t: float) -> None:
         proxy = self.proxy
         proxy.update(t)
-        for data in self._drain(t):
+        for data in self.link.drain(t):
             proxy.to_ground(data, t)
         proxy.flush(t)
         for data, _addr in proxy.from_ground(t):
-            if self._fw_addr is not None:
-                self.mav_sock.sendto(data, self._fw_addr)
+            self.link.send(data)
         x, y, _ = self.robot.pose
         st = proxy.state
         link, rssi = (1.0, math.nan) if st is None else (st.delivery, st.rssi_dbm)
-        mode = -1 if self.tap.mode is None else self.tap.mode
-        self.rows.append((t, x, y, math.nan, math.nan, mode, link, rssi, *self._cmd, self.tap.armed,
+        mode = -1 if self.link.tap.mode is None else self.link.tap.mode
+        self.rows.append((t, x, y, math.nan, math.nan, mode, link, rssi, *self.link.cmd, self.link.tap.armed,
                           self.world.collisions))
         if t >= self._next_report:
             self._next_report = t + 5.0
             quality = "perfect" if st is None else f"{st.rssi_dbm:6.1f} dBm, delivery {st.delivery:4.2f}"
-            print(f"t={t:7.1f} s  {MODE_NAMES.get(self.tap.mode, '?'):<10} {'armed' if self.tap.armed else 'disarmed'}"
+            tap = self.link.tap
+            print(f"t={t:7.1f} s  {MODE_NAMES.get(tap.mode, '?'):<10} {'armed' if tap.armed else 'disarmed'}"
                   f"  pos ({x:6.1f}, {y:6.1f})  link {quality}", file=self.out, flush=True)
 
-    def _close(self) -> None:
-        super()._close()
-        self.transport.sock.close()
+    def run(self) -> FirmwareServer:
+        try:
+            return super().run()
+        finally:
+            self.transport.sock.close()
