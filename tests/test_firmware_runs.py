@@ -225,3 +225,29 @@ def test_a_frame_counter_that_goes_back_ends_the_run_and_its_firmware(firmware):
     with pytest.raises(FirmwareError, match="restarted"):
         run.run()
     assert not run.link.process.alive()
+
+
+def test_a_repeated_frame_is_answered_again_without_a_physics_step(firmware):
+    stranger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    stranger.settimeout(5.0)
+
+    class Repeat(FirmwareRun):
+        def _boot(self) -> None:
+            super()._boot()
+            self.steps_at_boot = self.link.rules.counts[Verdict.STEP]
+
+        def _tick(self, t: float) -> None:
+            if abs(t - 1.0) < 1e-6:  # the frame just stepped, sent again: the bridge answers on its next read
+                frame = SERVO_PACKET.pack(MAGIC, 200, self.link.rules.last, *([1500] * 16))
+                stranger.sendto(frame, self.link.json_sock.getsockname())
+            super()._tick(t)
+
+    try:
+        run = Repeat(load("tunnel"), 1, "ardupilot-hold", firmware, duration=3.0).run()
+        answer = stranger.recv(4096)
+    finally:
+        stranger.close()
+    counts = run.link.rules.counts
+    assert counts[Verdict.REPEAT] >= 1 and answer.startswith(b"\n{") and b'"timestamp":' in answer
+    # a physics step per new frame, none per repeat (200 Hz: 5 ms each)
+    assert run.link.t_fw - run.link.boot_s == pytest.approx((counts[Verdict.STEP] - run.steps_at_boot) * 0.005)
