@@ -24,13 +24,12 @@ import bisect
 import math
 
 from sim.firmware.lockstep import MODE_NAMES
+from sim.firmware.operator import GUIDED, RETURN_MODES, RTL, SMART_RTL
 from sim.firmware.run import FirmwareRun
 from sim.metrics import FRAMES, KEYS, REGAIN_MOVED_M, _point, _r
 from vehicle.link_watch import GOOD_QUALITY as GOOD_LINK_QUALITY
 
 FIRMWARE_KEYS = (*KEYS, "firmware", "firmware_modes")
-RETURN_MODES = frozenset((4, 11, 12))
-GUIDED = 15
 
 
 def episodes(run: FirmwareRun) -> list[tuple[float, float | None, int]]:
@@ -113,7 +112,7 @@ def compute(run: FirmwareRun) -> dict:
                 moved = max((math.dist(rows[k][1:3], rest) for k in range(k_rest, k_of(since) + 1)), default=0.0)
                 regained_by = "operator" if moved > REGAIN_MOVED_M else "return"
         armed = next((r for r in rows if r[10]), None)
-        if first[2] in (11, 12) and armed is not None:
+        if first[2] in (RTL, SMART_RTL) and armed is not None:
             final_err = math.dist(rest, armed[1:3])
     est = [(r[1], r[2], r[3], r[4]) for r in rows if not math.isnan(r[3])]
     rmse = math.sqrt(sum((a - c) ** 2 + (b - d) ** 2 for a, b, c, d in est) / len(est)) if est else None

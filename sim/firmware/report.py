@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from sim.firmware.lockstep import MODE_NAMES
+from sim.firmware.operator import RETURN_MODES
 from sim.firmware.run import FirmwareRun
 from sim.plots import draw_world, plt, save
 
@@ -76,7 +77,7 @@ def timeline(run: FirmwareRun, path: Path) -> Path:
     ax.legend(loc="lower left", fontsize=7)
     ax = axes[2]
     step = np.concatenate([[0.0], np.hypot(np.diff(c["x"]), np.diff(c["y"]))]) if len(t) else np.zeros(0)
-    returning = np.isin(c["mode"], (4, 11, 12))
+    returning = np.isin(c["mode"], tuple(RETURN_MODES))
     ax.plot(t, np.cumsum(step * returning), color="tab:blue")
     ax.set_ylabel("driven back (m)")
     ax.set_xlabel("simulated time since the firmware was ready (s)")
