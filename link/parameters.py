@@ -45,6 +45,12 @@ SPECS: tuple[ParamSpec, ...] = (
 BY_NAME = {s.name: s for s in SPECS}
 
 
+def default(name: str) -> float:
+    """The contract default of ``name``: every feature's Config takes its defaults from here, so the table above
+    is the one place a default is written (``params/returnlink.parm`` is kept in step with it by a test)."""
+    return BY_NAME[name].default
+
+
 class ParamError(ValueError):
     pass
 

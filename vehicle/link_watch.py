@@ -1,4 +1,5 @@
-"""The owner's link, watched in one place: is it up, is it good, has it just been lost or regained (DESIGN §3.5, §6).
+"""The owner's link, watched in one place: is it up, is it good, has it just been lost or regained
+(docs/architecture.md §3.5, §6).
 
 Why a value of its own (STYLE §2, Spot's ``LeaseKeepAlive`` beside its ``LeaseWallet``): the lease ledger decides
 *what happens* on COMMS_LOST and LINK_REGAINED; this module decides *whether* they happened. Both were spread over
@@ -28,8 +29,13 @@ from __future__ import annotations
 import enum
 from bisect import bisect_right
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
+from link.parameters import default
 from vehicle.frozen import evolve
+
+if TYPE_CHECKING:
+    from vehicle.params import Params
 
 EPS = 1e-6  # s: deadline tolerance (far below the 20 ms tick, far above float error)
 GOOD_QUALITY = 0.8  # delivery at or above this is a good link (crumb tags, continuous contact)
@@ -55,13 +61,18 @@ _NO_TRIGGER = Trigger.NONE
 
 @dataclass(frozen=True)
 class WatchConfig:
-    """The LNK_* parameters the watch depends on."""
+    """The LNK_* parameters the watch depends on; defaults from the parameter table."""
 
-    timeout: float = 3.0  # LNK_TIMEOUT
-    regain_s: float = 1.0  # LNK_REGAIN_S
-    contact_gap: float = 1.5  # LNK_GOOD_S: the longest silence that still counts as continuous contact
-    min_quality: float = 0.25  # LNK_MIN_Q (0 = silence only)
+    timeout: float = default("LNK_TIMEOUT")
+    regain_s: float = default("LNK_REGAIN_S")
+    contact_gap: float = default("LNK_GOOD_S")  # the longest silence that still counts as continuous contact
+    min_quality: float = default("LNK_MIN_Q")  # 0 = silence only
     window: float = 1.0  # s: the delivery estimate behind "good" covers about this long
+
+    @classmethod
+    def from_params(cls, params: Params) -> WatchConfig:
+        return cls(timeout=params["LNK_TIMEOUT"], regain_s=params["LNK_REGAIN_S"],
+                   contact_gap=params["LNK_GOOD_S"], min_quality=params["LNK_MIN_Q"])
 
 
 @dataclass(frozen=True)

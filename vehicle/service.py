@@ -219,7 +219,7 @@ def step(st: ServiceState, x: float, y: float, yaw: float, t: float, trail: Trai
     if st.onward and not link_lost:
         # past a dead-zone target only for want of the link: it is back (a block that continues on regain)
         return ServiceStep(st, 0.0, 0.0, ExpireReason.COMPLETED)
-    cfg = FollowerConfig(arrive_radius=params["RTL_ARRIVE_R"])
+    cfg = FollowerConfig.from_params(params)
     cmd = follow(st.path, x, y, yaw, st.progress, cruise(st), cfg, st.reverse)
     if cmd.arrived:
         onward = _go_on(replace(st, progress=cmd.progress), x, y, t, params, link_lost)
