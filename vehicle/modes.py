@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from vehicle.app import State
+from vehicle.lease_terms import State
 
 CUSTOM_MODE_ENABLED = 1  # MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 # PX4 custom_mode: main mode in bits 16-23, sub mode in bits 24-31
