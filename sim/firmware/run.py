@@ -35,14 +35,14 @@ from pymavlink.dialects.v20 import ardupilotmega as apm
 from link.proxy import RadioReport
 from link.radio import LinkState, Radio, subsystem_rng
 from link.transports import LockstepBus
-from sim.firmware.bridge import FrameRules, ServoMap, Verdict, parse_servo, state_reply
+from sim.firmware.bridge import FrameRules, FrameVerdict, ServoMap, parse_servo, state_reply
 from sim.firmware.operator import GCS_COMPID, RETURN_MODES, FirmwareOperator
 from sim.firmware.process import FirmwareError, FirmwareProcess, claim_instance
 from sim.robots import make_robot
 from sim.runner import TLOG_EPOCH_US
 from sim.scenario import Scenario
+from vehicle.app import DT  # the native vehicle's tick: radio, stations, operator and events move at this pace
 
-DT = 0.02  # the native vehicle's tick: radio, stations, operator and events move at this pace
 RATE = 200  # the firmware's physics frame rate (--rate): below about 65 Hz its gyro-rate pre-arm check fails
 SPEEDUP = 1000  # far beyond what the lockstep reaches: the bridge, not the firmware's clock, sets the pace
 BOOT_LIMIT_S = 120.0  # simulated seconds the firmware gets to boot and find its home
@@ -243,11 +243,11 @@ class FirmwareRun:
                                     f"its last words:\n{tail}") from None
             frame = parse_servo(data)
             verdict = self.rules.judge(frame)
-            if verdict is Verdict.STEP:
+            if verdict is FrameVerdict.STEP:
                 return frame, addr
-            if verdict is Verdict.REPEAT and self._sent is not None:
+            if verdict is FrameVerdict.REPEAT and self._sent is not None:
                 self.json_sock.sendto(self._sent, addr)
-            elif verdict is Verdict.RESTART:
+            elif verdict is FrameVerdict.RESTART:
                 raise FirmwareError(f"the firmware restarted (frame counter went back to {frame.frame_count})")
 
     def _step(self, pwm: tuple[int, ...], dt: float) -> None:
