@@ -17,6 +17,7 @@ from link import dialect
 from link.codec import read_frames
 from link.mission import Item
 from link.signing import Key, SigningVerdict, Streams, advance, enable, sim_stamp
+from link.wire import MAVLINK_VERSION, NO_INDEX
 
 mav = dialect.load()
 
@@ -24,7 +25,6 @@ COMMAND_RETRY = 1.0  # s between retries of an unanswered command
 COMMAND_TRIES = 4
 TELEOP_PERIOD = 0.1  # s: teleop is streamed at 10 Hz
 STOPPED = ("velocity", 0.0, 0.0, math.nan)  # the teleop stream of a station holding still (zero velocity)
-MAVLINK_VERSION = 3  # HEARTBEAT.mavlink_version (what pymavlink's heartbeat_send fills in)
 _UNRESOLVED = object()  # a message type whose handler has not been looked up yet
 # the dialect's message types that carry a target_system, by name: most of the vehicle's telemetry does not, and
 # asking each of those frames for the field would cost a failed attribute lookup per frame
@@ -352,8 +352,8 @@ class GroundStation:
         reason = mav.enums["LEASE_EXPIRE_REASON"].get(m.reason)
         holder = mav.enums["LEASE_HOLDER"].get(m.holder)
         self.events.append(LeaseEventRecord(
-            t, m.epoch, None if m.expired_index == 65535 else m.expired_index,
-            None if m.current_index == 65535 else m.current_index,
+            t, m.epoch, None if m.expired_index == NO_INDEX else m.expired_index,
+            None if m.current_index == NO_INDEX else m.current_index,
             reason.name.removeprefix("LEASE_EXPIRE_REASON_") if reason else str(m.reason),
             holder.name.removeprefix("LEASE_HOLDER_") if holder else str(m.holder)))
 

@@ -27,15 +27,13 @@ from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
 
+from link.wire import HEADER_V2, IFLAG_SIGNED, SIGNATURE_BLOCK, STX_V2
+
 EPOCH_UNIX = 1420070400  # 2015-01-01 00:00:00 UTC, the origin of signing timestamps
 UNITS_PER_SECOND = 100_000  # timestamps count 10 µs units
 NEW_STREAM_WINDOW = 6_000_000  # a new stream may be at most 60 s behind our own timestamp
 MAX_TIMESTAMP = 2**48 - 1
 KEY_BYTES = 32
-SIGNATURE_BLOCK = 13  # link id (1) + timestamp (6) + signature (6)
-IFLAG_SIGNED = 0x01
-STX_V2 = 0xFD
-HEADER_V2 = 10
 # lockstep simulation: stamps are simulated time on top of a fixed origin (2026-01-01 UTC), so runs are repeatable
 SIM_ORIGIN = (1767225600 - EPOCH_UNIX) * UNITS_PER_SECOND
 

@@ -15,10 +15,11 @@ import enum
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, NamedTuple
 
+from link.wire import NO_INDEX  # noqa: F401 - the lease vocabulary's "no lease", re-exported for its readers
+
 if TYPE_CHECKING:
     from vehicle.lease import LeaseBook
 
-NO_INDEX = 0xFFFF  # wire value for "no lease" in LEASE_EVENT / LEASE_STATUS
 
 
 class Holder(enum.IntEnum):
