@@ -1,4 +1,4 @@
-"""The parameter table of DESIGN §5 and the .parm text format (MAVProxy/ArduPilot), shared by both ends.
+"""The parameter table of docs/architecture.md §5 and the .parm text format (MAVProxy/ArduPilot), shared by both ends.
 
 The names, defaults, ranges and meanings are part of the interface contract: the vehicle enforces them, and a
 ground station, a scenario file or a campaign spec checks a value against the same table before it sends or runs

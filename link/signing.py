@@ -1,4 +1,4 @@
-"""MAVLink 2 message signing (DESIGN §4.1), pure and shared by the vehicle and the ground station.
+"""MAVLink 2 message signing (docs/architecture.md §4.1), pure and shared by the vehicle and the ground station.
 
 Without signing, one UDP packet is enough to learn the epoch and the owner from the broadcast telemetry and to act
 as the owner: force a return, change a parameter, take the root, or keep the link-loss trigger from ever firing

@@ -7,8 +7,8 @@ real-time-factor figure, so the same scenario and seed give the same metrics.
 
 Every random draw comes from a stream of its own subsystem, derived from the seed by name (the robot, the
 sensors, the shadowing field, each direction of each station's radio link): a run flown under another link-loss
-policy (``policy=``, DESIGN §9) sees the same world, noise and packet fates, and so the same trace, until the
-first COMMS_LOST, where only the policy differs.
+policy (``policy=``, docs/architecture.md §9) sees the same world, noise and packet fates, and so the same trace, until
+the first COMMS_LOST, where only the policy differs.
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""The attack suite (DESIGN §4.1): with a signing key installed, a station without it can watch but never act.
+"""The attack suite (docs/architecture.md §4.1): with a signing key installed, a station without it can watch but never
+act.
 
 Each test is one attack from a station that has no key, usually spoofing the owner's sysid (255, compid 190, as
 anyone who reads LEASE_STATUS could): it must fail, be counted, and leave the vehicle as it was. The owner signs
@@ -60,7 +61,7 @@ def test_a_replayed_frame_is_refused():
     d = gs.arm(False)
     captured = list(gs.frames)  # the signed DISARM, as a listener on the link would record it
     pair.until(lambda: d.done, 2, "ACK")
-    pair.step(3.1)  # an identical ARM within the 3 s retry window would be answered, not run (DESIGN §3.9)
+    pair.step(3.1)  # an identical ARM within 3 s would be answered, not run (docs/architecture.md §3.9)
     a = gs.arm(True)
     pair.until(lambda: a.done, 2, "ACK")
     pair.step(5.0)  # past the command retry window: only the signature's timestamp tells a replay now

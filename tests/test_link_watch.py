@@ -1,5 +1,6 @@
 """The owner's link watch as timelines (PX4 failsafe_test style): time is advanced by hand and the trigger is
-checked after each step. One story per rule of DESIGN §3.5 and §6 "Where the return ends" about the link."""
+checked after each step. One story per rule of docs/architecture.md §3.5 and §6 "Where the return ends" about the link.
+"""
 
 from __future__ import annotations
 

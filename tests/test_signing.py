@@ -1,5 +1,5 @@
-"""MAVLink 2 signing, one behaviour per test (DESIGN §4.1): the pure verifier, key and timestamp files, and the
-vehicle's signing clock across a reboot."""
+"""MAVLink 2 signing, one behaviour per test (docs/architecture.md §4.1): the pure verifier, key and timestamp files,
+and the vehicle's signing clock across a reboot."""
 
 from __future__ import annotations
 

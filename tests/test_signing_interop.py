@@ -1,5 +1,5 @@
-"""Real clients against a keyed vehicle over loopback UDP (DESIGN §4.1): MAVProxy with its signing module flies
-it; MAVSDK 4, which cannot sign, can watch it (telemetry, parameter download) but not act on it."""
+"""Real clients against a keyed vehicle over loopback UDP (docs/architecture.md §4.1): MAVProxy with its signing module
+flies it; MAVSDK 4, which cannot sign, can watch it (telemetry, parameter download) but not act on it."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The breadcrumb trail: where the robot has been, by its own estimate, and whether it could hear the operator there.
 
-Why it looks like this (DESIGN §6, and what SmartRTL gets wrong):
+Why it looks like this (docs/architecture.md §6, and what SmartRTL gets wrong):
 
 * Crumbs come from the estimator, never from ground truth, so the same code runs on a real robot.
 * Simplification is online and O(1) per crumb: a *sleeve* (angular wedge) from the last kept point narrows with

@@ -1,4 +1,4 @@
-"""The JSON SITL backend's packet contract, as pure functions and one small state machine (DESIGN §10).
+"""The JSON SITL backend's packet contract, as pure functions and one small state machine (docs/architecture.md §10).
 
 ArduPilot sends ``<HHI16H``: magic 18458, its frame rate, a frame counter and 16 PWM values in µs, once per
 physics step it wants; the physics program answers each with ``"\\n" + json + "\\n"``. The firmware finds each
