@@ -16,6 +16,7 @@ from gcs.mission_transfer import MissionClient, Transfer
 from link import dialect
 from link.codec import read_frames
 from link.mission import Item
+from link.modes import PX4_AUTO, PX4_AUTO_LOITER
 from link.signing import Key, SigningVerdict, Streams, advance, enable, sim_stamp
 from link.wire import MAVLINK_VERSION, NO_INDEX
 
@@ -25,10 +26,14 @@ COMMAND_RETRY = 1.0  # s between retries of an unanswered command
 COMMAND_TRIES = 4
 TELEOP_PERIOD = 0.1  # s: teleop is streamed at 10 Hz
 STOPPED = ("velocity", 0.0, 0.0, math.nan)  # the teleop stream of a station holding still (zero velocity)
-_UNRESOLVED = object()  # a message type whose handler has not been looked up yet
 # the dialect's message types that carry a target_system, by name: most of the vehicle's telemetry does not, and
 # asking each of those frames for the field would cost a failed attribute lookup per frame
 TARGETED = frozenset(cls.msgname for cls in mav.mavlink_map.values() if "target_system" in cls.fieldnames)
+# SET_POSITION_TARGET_LOCAL_NED for a velocity (and a yaw rate unless that is ignored too): every other field ignored
+VELOCITY_ONLY = (mav.POSITION_TARGET_TYPEMASK_X_IGNORE | mav.POSITION_TARGET_TYPEMASK_Y_IGNORE
+                 | mav.POSITION_TARGET_TYPEMASK_Z_IGNORE | mav.POSITION_TARGET_TYPEMASK_AX_IGNORE
+                 | mav.POSITION_TARGET_TYPEMASK_AY_IGNORE | mav.POSITION_TARGET_TYPEMASK_AZ_IGNORE
+                 | mav.POSITION_TARGET_TYPEMASK_YAW_IGNORE)
 
 
 @dataclass(frozen=True)
@@ -145,7 +150,6 @@ class GroundStation:
         self.teleop: tuple[str, float, float, float] | None = None  # (kind, a, b, c) streamed at 10 Hz
         self.next_teleop = 0.0
         self.listeners: list[Callable[[object, float], None]] = []
-        self._handlers: dict[str, Callable[[object, float], None] | None] = {}  # message type -> its _on_ method
         self.t = 0.0
 
     # pymavlink writes encoded frames here
@@ -223,7 +227,7 @@ class GroundStation:
 
     def hold(self) -> Pending:
         self.teleop = None
-        return self.command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, 3)
+        return self.command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, PX4_AUTO, PX4_AUTO_LOITER)
 
     def arm(self, armed: bool = True) -> Pending:
         return self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, float(armed))
@@ -246,14 +250,13 @@ class GroundStation:
     def _send_teleop(self) -> None:
         assert self.teleop is not None
         kind, a, b, c = self.teleop
-        # the message object straight to ``send``: what ``<name>_send`` does, two calls fewer at 10 Hz
         if kind == "manual":
-            self.mav.send(mav.MAVLink_manual_control_message(self.target, int(a * 1000), 0, 500, int(b * 1000), 0))
+            self.mav.manual_control_send(self.target, int(a * 1000), 0, 500, int(b * 1000), 0)
         else:
-            mask = 0b0000_1101_1100_0111 if math.isnan(c) else 0b0000_0101_1100_0111
-            self.mav.send(mav.MAVLink_set_position_target_local_ned_message(
+            mask = VELOCITY_ONLY | mav.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE if math.isnan(c) else VELOCITY_ONLY
+            self.mav.set_position_target_local_ned_send(
                 0, self.target, self.target_comp, mav.MAV_FRAME_LOCAL_NED, mask, 0, 0, 0, a, b, 0, 0, 0, 0, 0,
-                0.0 if math.isnan(c) else c))
+                0.0 if math.isnan(c) else c)
 
     # ----- parameters ----------------------------------------------------------------------------------------
     def param_request_all(self) -> None:
@@ -316,11 +319,8 @@ class GroundStation:
         self.vehicle.last_heard = t
         if kind in TARGETED and m.target_system != 0 and m.target_system != self.sysid:
             return  # addressed to another station
-        handler = self._handlers.get(kind, _UNRESOLVED)
-        if handler is _UNRESOLVED:  # the first message of a kind names its handler; later ones look it up
-            name = kind.lower()
-            handler = getattr(self, f"_on_{name}", None) or getattr(self.missions, f"on_{name}", None)
-            self._handlers[kind] = handler
+        name = kind.lower()
+        handler = getattr(self, f"_on_{name}", None) or getattr(self.missions, f"on_{name}", None)
         if handler is not None:
             handler(m, t)
         for fn in self.listeners:
