@@ -1,5 +1,5 @@
 """Speed of a firmware run: the 10-minute `tunnel` flown by the real ArduPilot Rover SITL through the JSON bridge,
-as wall-clock real-time factor (DESIGN §10: >= 30x, the bridge on one core), next to where the time goes: the
+as wall-clock real-time factor (docs/architecture.md §10: >= 30x, the bridge on one core), next to where the time goes: the
 bridge's own CPU (this process: physics, JSON answers, radio, operator, MAVLink parsing), the firmware's CPU (its
 process, from /proc), and the rest (waiting on each other over loopback).
 
@@ -23,7 +23,7 @@ from sim.firmware.locate import FirmwareNotFound, find_firmware
 from sim.firmware.run import FirmwareRun
 from sim.scenario import load
 
-TARGET_X = 30.0  # DESIGN §10: a 10-minute tunnel run with the firmware at >= 30x real time, wall clock
+TARGET_X = 30.0  # docs/architecture.md §10: a 10-minute tunnel run with the firmware at >= 30x real time, wall clock
 
 
 def _child_cpu(pid: int) -> float:

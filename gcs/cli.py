@@ -48,8 +48,8 @@ def _open_client(args: argparse.Namespace):
 
 
 def _signing_key(args: argparse.Namespace):
-    """The key of ``--key FILE`` where that option exists (DESIGN §4.1); a damaged or missing file is a usage
-    error naming the file and line, reported before any link opens."""
+    """The key of ``--key FILE`` where that option exists (docs/architecture.md §4.1); a damaged or missing file is a
+    usage error naming the file and line, reported before any link opens."""
     path = getattr(args, "key", None)
     if not path:
         return None

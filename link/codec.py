@@ -20,22 +20,18 @@ from __future__ import annotations
 
 import sys
 
-MARKER_V2 = 0xFD
-HEADER_V2 = 10  # bytes before the payload
-CHECKSUM = 2
-SIGNATURE = 13
-IFLAG_SIGNED = 0x01
+from link.wire import CHECKSUM, HEADER_V2, IFLAG_SIGNED, SIGNATURE_BLOCK, STX_V2
 
 
 def _one_frame(data) -> bool:
     """Whether ``data`` is exactly one MAVLink 2 frame by its length fields (its content is decode's to judge)."""
     n = len(data)
-    if n < HEADER_V2 + CHECKSUM or data[0] != MARKER_V2:
+    if n < HEADER_V2 + CHECKSUM or data[0] != STX_V2:
         return False
     flags = data[2]
     if flags & ~IFLAG_SIGNED:
         return False  # unknown incompatibility flags: the slow path reports them as BAD_DATA
-    return n == HEADER_V2 + data[1] + CHECKSUM + (SIGNATURE if flags & IFLAG_SIGNED else 0)
+    return n == HEADER_V2 + data[1] + CHECKSUM + (SIGNATURE_BLOCK if flags & IFLAG_SIGNED else 0)
 
 
 def read_frames(parser, data) -> list:

@@ -487,8 +487,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--policy", choices=POLICY_NAMES,
                      help=f"what the vehicle does when its link is lost: the scenario's plan ({DEFAULT_POLICY}, the "
-                          "default), a baseline (DESIGN §9), or with --vehicle ardurover the firmware's own failsafe "
-                          "(default ardupilot-smartrtl)")
+                          "default), a baseline (docs/architecture.md §9), or with --vehicle ardurover the "
+                          "firmware's own failsafe (default ardupilot-smartrtl)")
     _add_firmware_option(run)
     _add_run_campaign_options(run)
     run.set_defaults(func=_cmd_sim_run)

@@ -1,4 +1,4 @@
-"""The figures of one run (DESIGN §7: the keys of metrics.json are a contract) and the scenario's verdict.
+"""The figures of one run (docs/architecture.md §7: the keys of metrics.json are a contract) and the scenario's verdict.
 
 Positions are compared in one frame, the true one (the simulator's ground truth): the loss and rest positions,
 distances and displacements, and the return target, which the vehicle chose in its estimate frame, is taken as
@@ -19,7 +19,7 @@ KEYS = ("scenario", "vehicle", "seed", "sim_duration_s", "link_lost_s", "return_
         "link_regained_s", "distance_back_m", "max_displacement_m", "final_target_error_m", "collisions",
         "stale_commands_executed", "commands_rejected", "estimator_rmse_m", "trail_points",
         "trail_max_deviation_m", "real_time_factor", "lease_events", "passed", "failures",
-        # added compatibly (DESIGN §7, §9)
+        # added compatibly (docs/architecture.md §7, §9)
         "policy", "loss_position", "rest_position", "rest_link_quality", "link_cycles", "regained_by",
         "collisions_during_return", "return_speed_mps", "blocks", "frames")
 FRAMES = {"loss_position": "true", "rest_position": "true", "distance_back_m": "true", "max_displacement_m": "true",

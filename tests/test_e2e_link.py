@@ -1,5 +1,5 @@
-"""Whole `sim run` missions for the link rules of DESIGN §6, on scenario variants written in a temporary directory:
-the symptoms were seen end to end, so they are checked end to end."""
+"""Whole `sim run` missions for the link rules of docs/architecture.md §6, on scenario variants written in a temporary
+directory: the symptoms were seen end to end, so they are checked end to end."""
 
 from __future__ import annotations
 

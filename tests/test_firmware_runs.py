@@ -1,4 +1,4 @@
-"""The real ArduPilot Rover firmware in the tunnel (DESIGN §10): its own failsafes, its mode timeline, paired
+"""The real ArduPilot Rover firmware in the tunnel (docs/architecture.md §10): its own failsafes, its mode timeline, paired
 with the native runs until the loss, deterministic, two runs side by side, and stopped on SIGTERM."""
 
 from __future__ import annotations

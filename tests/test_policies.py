@@ -1,6 +1,6 @@
-"""The link-loss policies of DESIGN §9 flown end to end on the same vehicle and simulator, and the paired trials
-that make them comparable: each baseline shows its anchor's documented behaviour, and a trial and its baseline are
-identical until the link is lost."""
+"""The link-loss policies of docs/architecture.md §9 flown end to end on the same vehicle and simulator, and the paired
+trials that make them comparable: each baseline shows its anchor's documented behaviour, and a trial and its baseline
+are identical until the link is lost."""
 
 from __future__ import annotations
 

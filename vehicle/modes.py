@@ -9,14 +9,25 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from vehicle.app import State
+from link import dialect
+from link.modes import (  # noqa: F401 - the mode numbers, re-exported for the vehicle's readers
+    AP_ACRO,
+    AP_AUTO,
+    AP_HOLD,
+    AP_MANUAL,
+    AP_RTL,
+    AP_SMART_RTL,
+    AP_STEERING,
+    PX4_AUTO,
+    PX4_AUTO_LOITER,
+    PX4_AUTO_MISSION,
+    PX4_AUTO_RTL,
+    PX4_MANUAL,
+    PX4_POSCTL,
+)
+from vehicle.lease_terms import State
 
-CUSTOM_MODE_ENABLED = 1  # MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
-# PX4 custom_mode: main mode in bits 16-23, sub mode in bits 24-31
-PX4_MANUAL, PX4_POSCTL, PX4_AUTO = 1, 3, 4
-PX4_AUTO_LOITER, PX4_AUTO_MISSION, PX4_AUTO_RTL = 3, 4, 5
-# ArduPilot Rover mode numbers
-AP_MANUAL, AP_ACRO, AP_STEERING, AP_HOLD, AP_AUTO, AP_RTL, AP_SMART_RTL = 0, 1, 3, 4, 10, 11, 12
+CUSTOM_MODE_ENABLED = dialect.load().MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 
 
 def custom_mode(state: int, holding: bool) -> int:

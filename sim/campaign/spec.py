@@ -38,7 +38,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-VEHICLES = ("rover", "legged", "ardurover")  # ardurover: the real ArduPilot firmware (DESIGN §10)
+VEHICLES = ("rover", "legged", "ardurover")  # ardurover: the real ArduPilot firmware (docs/architecture.md §10)
 FIELDS = ("scenarios", "vehicles", "seeds", "params", "radio", "policies", "timeout_s")
 MAX_TRIALS = 1_000_000  # a typo such as seeds = {from = 1, to = 1e9} is refused before it fills a disk
 DEFAULT_TIMEOUT_S = 600.0

@@ -32,7 +32,8 @@ FLUSH_SHARE = 20.0  # the gap between rewrites is at least this many times what 
 INPUTS = [("trial_id", pa.string()), ("scenario", pa.string()), ("source", pa.string()),
           ("scenario_text", pa.string()), ("vehicle", pa.string()), ("seed", pa.int64()),
           ("params", pa.string()), ("policy", pa.string())]
-# every metric of DESIGN §7 (scenario, vehicle, seed and policy are the inputs above); nested ones as JSON text
+# every metric of docs/architecture.md §7 (scenario, vehicle, seed and policy are the inputs above); nested ones as JSON
+# text
 JSON_METRICS = ("lease_events", "failures", "loss_position", "rest_position", "blocks", "firmware_modes")
 METRICS = [("sim_duration_s", pa.float64()), ("link_lost_s", pa.float64()), ("return_started_s", pa.float64()),
            ("reaction_latency_s", pa.float64()), ("link_regained_s", pa.float64()),
@@ -44,7 +45,7 @@ METRICS = [("sim_duration_s", pa.float64()), ("link_lost_s", pa.float64()), ("re
            ("failures", pa.string()), ("loss_position", pa.string()), ("rest_position", pa.string()),
            ("rest_link_quality", pa.float64()), ("link_cycles", pa.int64()), ("regained_by", pa.string()),
            ("collisions_during_return", pa.int64()), ("return_speed_mps", pa.float64()), ("blocks", pa.string()),
-           # vehicle ardurover only (DESIGN §10): the firmware's version and its mode timeline
+           # vehicle ardurover only (docs/architecture.md §10): the firmware's version and its mode timeline
            ("firmware", pa.string()), ("firmware_modes", pa.string())]
 OUTCOME = [("status", pa.string()), ("error", pa.string()), ("cpu_s", pa.float64())]
 SCHEMA = pa.schema(INPUTS + METRICS + OUTCOME)

@@ -1,4 +1,4 @@
-"""The real ArduPilot Rover firmware in returnlink's worlds (docs: DESIGN §10).
+"""The real ArduPilot Rover firmware in returnlink's worlds (docs/architecture.md §10).
 
 The firmware is a separate process, never linked or copied: ``locate`` finds its binary, ``process`` starts it in
 its own directory with an instance number no other run holds and stops it by process id, ``bridge`` is the JSON

@@ -1,4 +1,4 @@
-"""The JSON SITL backend's packet contract, as pure functions and one small state machine (DESIGN §10).
+"""The JSON SITL backend's packet contract, as pure functions and one small state machine (docs/architecture.md §10).
 
 ArduPilot sends ``<HHI16H``: magic 18458, its frame rate, a frame counter and 16 PWM values in µs, once per
 physics step it wants; the physics program answers each with ``"\\n" + json + "\\n"``. The firmware finds each
@@ -59,7 +59,9 @@ def parse_servo(data: bytes) -> ServoFrame | None:
     return ServoFrame(rate, count, tuple(pwm))
 
 
-class Verdict(Enum):
+class FrameVerdict(Enum):
+    """What to do with one servo packet from the firmware."""
+
     STEP = "step"  # a new frame: step the physics once, answer with the new state
     REPEAT = "repeat"  # the same frame again: answer again, no step
     RESTART = "restart"  # the counter went back: the firmware restarted
@@ -71,18 +73,18 @@ class FrameRules:
 
     def __init__(self) -> None:
         self.last: int | None = None
-        self.counts = {v: 0 for v in Verdict}
+        self.counts = {v: 0 for v in FrameVerdict}
 
-    def judge(self, frame: ServoFrame | None) -> Verdict:
+    def judge(self, frame: ServoFrame | None) -> FrameVerdict:
         if frame is None:
-            v = Verdict.MALFORMED
+            v = FrameVerdict.MALFORMED
         elif self.last is None or frame.frame_count > self.last:
-            v = Verdict.STEP
+            v = FrameVerdict.STEP
         elif frame.frame_count == self.last:
-            v = Verdict.REPEAT
+            v = FrameVerdict.REPEAT
         else:
-            v = Verdict.RESTART
-        if v is Verdict.STEP or v is Verdict.RESTART:
+            v = FrameVerdict.RESTART
+        if v is FrameVerdict.STEP or v is FrameVerdict.RESTART:
             self.last = frame.frame_count
         self.counts[v] += 1
         return v

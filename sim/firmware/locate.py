@@ -1,6 +1,6 @@
 """Finding the ArduPilot Rover SITL binary: ``--firmware PATH``, else ``RETURNLINK_ARDUROVER``, else ``ardurover``
-on PATH (DESIGN §10). A missing or unusable binary is a usage error (exit 2) that names all three ways and how to
-build one, because a user who asked for the real firmware must not silently get something else."""
+on PATH (docs/architecture.md §10). A missing or unusable binary is a usage error (exit 2) that names all three ways and
+how to build one, because a user who asked for the real firmware must not silently get something else."""
 
 from __future__ import annotations
 

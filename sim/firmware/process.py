@@ -1,4 +1,4 @@
-"""Starting and stopping one firmware process (DESIGN §10).
+"""Starting and stopping one firmware process (docs/architecture.md §10).
 
 Each run gets its own temporary directory (the firmware writes ``eeprom.bin`` and ``logs/`` where it runs; ``-w``
 wipes stored parameters, so nothing leaks from one run to the next) and its own instance number ``-I N``, which adds

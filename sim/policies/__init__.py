@@ -1,4 +1,5 @@
-"""Link-loss policies a trial can fly (DESIGN §9): returnlink itself and the baselines it is compared against.
+"""Link-loss policies a trial can fly (docs/architecture.md §9): returnlink itself and the baselines it is compared
+against.
 
 Every policy runs on the same vehicle and simulator, so only the policy differs between paired trials: the
 lease book, its COMMS_LOST trigger, telemetry, the radio and the operator's script are the same; a baseline is a
@@ -13,7 +14,7 @@ if TYPE_CHECKING:  # the command line reads the names without loading the vehicl
     from vehicle.app import Contingency
 
 NATIVE_POLICIES: tuple[str, ...] = ("returnlink", "hold", "rtl", "smartrtl", "backup")
-# the real ArduPilot firmware's own failsafes (DESIGN §10), flown only by vehicle ``ardurover``
+# the real ArduPilot firmware's own failsafes (docs/architecture.md §10), flown only by vehicle ``ardurover``
 FIRMWARE_POLICIES: tuple[str, ...] = ("ardupilot-hold", "ardupilot-rtl", "ardupilot-smartrtl")
 POLICY_NAMES: tuple[str, ...] = NATIVE_POLICIES + FIRMWARE_POLICIES
 DEFAULT_POLICY = "returnlink"
