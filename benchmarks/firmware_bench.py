@@ -1,7 +1,7 @@
 """Speed of a firmware run: the 10-minute `tunnel` flown by the real ArduPilot Rover SITL through the JSON bridge,
-as wall-clock real-time factor (docs/architecture.md §10: >= 30x, the bridge on one core), next to where the time goes: the
-bridge's own CPU (this process: physics, JSON answers, radio, operator, MAVLink parsing), the firmware's CPU (its
-process, from /proc), and the rest (waiting on each other over loopback).
+as wall-clock real-time factor (docs/architecture.md §10: >= 30x, the bridge on one core), next to where the time
+goes: the bridge's own CPU (this process: physics, JSON answers, radio, operator, MAVLink parsing), the
+firmware's CPU (its process, from /proc), and the rest (waiting on each other over loopback).
 
 Wall time is the figure here by nature (two processes in lockstep; the firmware's share is not this process's
 CPU), so a busy machine lowers it: the CPU split says how much of a run was each side's work. The firmware comes

@@ -1,5 +1,6 @@
-"""The real ArduPilot Rover firmware in the tunnel (docs/architecture.md §10): its own failsafes, its mode timeline, paired
-with the native runs until the loss, deterministic, two runs side by side, and stopped on SIGTERM."""
+"""The real ArduPilot Rover firmware in the tunnel (docs/architecture.md §10): its own failsafes, its mode
+timeline, paired across policies until the loss, repeatable until the loss, two runs side by side, the bridge's
+frame rules mid-run, and stopped on SIGTERM."""
 
 from __future__ import annotations
 
