@@ -12,9 +12,9 @@ from sim.firmware.bridge import (
     MAGIC,
     SERVO_PACKET,
     FrameRules,
+    FrameVerdict,
     ServoFrame,
     ServoMap,
-    Verdict,
     parse_servo,
     state_reply,
 )
@@ -38,11 +38,11 @@ def test_frame_rules_step_repeat_restart_malformed():
     rules = FrameRules()
     seq = [parse_servo(packet(c)) for c in (0, 1, 1, 2, 5)] + [None, parse_servo(packet(3))]
     got = [rules.judge(f) for f in seq]
-    assert got == [Verdict.STEP, Verdict.STEP, Verdict.REPEAT, Verdict.STEP, Verdict.STEP, Verdict.MALFORMED,
-                   Verdict.RESTART]
-    assert rules.counts[Verdict.REPEAT] == 1 and rules.counts[Verdict.MALFORMED] == 1
+    V = FrameVerdict
+    assert got == [V.STEP, V.STEP, V.REPEAT, V.STEP, V.STEP, V.MALFORMED, V.RESTART]
+    assert rules.counts[FrameVerdict.REPEAT] == 1 and rules.counts[FrameVerdict.MALFORMED] == 1
     # after a restart the new counter is the reference: its next frame steps
-    assert rules.judge(parse_servo(packet(4))) is Verdict.STEP
+    assert rules.judge(parse_servo(packet(4))) is FrameVerdict.STEP
 
 
 def test_throttle_and_steering_follow_the_sitl_rover_geometry():

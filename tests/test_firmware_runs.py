@@ -22,7 +22,7 @@ from sim.campaign.executors import SerialExecutor
 from sim.campaign.spec import parse_spec
 from sim.cli import main
 from sim.firmware import metrics
-from sim.firmware.bridge import MAGIC, SERVO_PACKET, Verdict
+from sim.firmware.bridge import MAGIC, SERVO_PACKET, FrameVerdict
 from sim.firmware.metrics import TOLERANCE
 from sim.firmware.process import FirmwareError, wait_for
 from sim.firmware.run import FirmwareRun
@@ -216,7 +216,7 @@ class Injecting(FirmwareRun):
 def test_a_malformed_packet_on_the_bridge_is_counted_and_ignored(firmware):
     run = type("Garbage", (Injecting,), {"packet": b"\x00garbage, not a servo packet"})(
         load("tunnel"), 1, "ardupilot-hold", firmware, duration=5.0).run()
-    assert run.link.rules.counts[Verdict.MALFORMED] == 1
+    assert run.link.rules.counts[FrameVerdict.MALFORMED] == 1
     assert len(run.rows) == 250 and not run.link.process.alive()
 
 
@@ -235,7 +235,7 @@ def test_a_repeated_frame_is_answered_again_without_a_physics_step(firmware):
     class Repeat(FirmwareRun):
         def _boot(self) -> None:
             super()._boot()
-            self.steps_at_boot = self.link.rules.counts[Verdict.STEP]
+            self.steps_at_boot = self.link.rules.counts[FrameVerdict.STEP]
 
         def _tick(self, t: float) -> None:
             if abs(t - 1.0) < 1e-6:  # the frame just stepped, sent again: the bridge answers on its next read
@@ -249,6 +249,6 @@ def test_a_repeated_frame_is_answered_again_without_a_physics_step(firmware):
     finally:
         stranger.close()
     counts = run.link.rules.counts
-    assert counts[Verdict.REPEAT] >= 1 and answer.startswith(b"\n{") and b'"timestamp":' in answer
+    assert counts[FrameVerdict.REPEAT] >= 1 and answer.startswith(b"\n{") and b'"timestamp":' in answer
     # a physics step per new frame, none per repeat (200 Hz: 5 ms each)
-    assert run.link.t_fw - run.link.boot_s == pytest.approx((counts[Verdict.STEP] - run.steps_at_boot) * 0.005)
+    assert run.link.t_fw - run.link.boot_s == pytest.approx((counts[FrameVerdict.STEP] - run.steps_at_boot) * 0.005)

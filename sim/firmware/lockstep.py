@@ -17,7 +17,7 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
-from sim.firmware.bridge import SKID_FUNCTIONS, FrameRules, ServoMap, Verdict, parse_servo, state_reply
+from sim.firmware.bridge import SKID_FUNCTIONS, FrameRules, FrameVerdict, ServoMap, parse_servo, state_reply
 from sim.firmware.process import FirmwareError, FirmwareProcess, claim_instance
 from sim.robots import Robot
 from sim.world import World
@@ -165,11 +165,11 @@ class Lockstep:
                                     f"its last words:\n{tail}") from None
             frame = parse_servo(data)
             verdict = self.rules.judge(frame)
-            if verdict is Verdict.STEP:
+            if verdict is FrameVerdict.STEP:
                 return frame, addr
-            if verdict is Verdict.REPEAT and self._sent is not None:
+            if verdict is FrameVerdict.REPEAT and self._sent is not None:
                 self.json_sock.sendto(self._sent, addr)
-            elif verdict is Verdict.RESTART:
+            elif verdict is FrameVerdict.RESTART:
                 raise FirmwareError(f"the firmware restarted (frame counter went back to {frame.frame_count})")
 
     def _step(self, pwm: tuple[int, ...], dt: float) -> None:
