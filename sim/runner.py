@@ -181,6 +181,9 @@ class Run:
         self.audit_stale = 0  # actuations the runner's own audit found outside the announced current lease
         self.announced: tuple[int, int | None] | None = None  # (epoch, current index) from LEASE_EVENTs
         self.losses: list[tuple[float, float | None]] = []  # (COMMS_LOST time, owner last heard before it)
+        # when each loss's trigger condition became true: LNK_TIMEOUT after the owner was last heard (silence), or
+        # the tick the owner's delivery estimate fell below LNK_MIN_Q (quality), whichever came first
+        self.loss_conditions: list[float | None] = []
 
     # ----- the loop ------------------------------------------------------------------------------------------
     def run(self) -> Run:
@@ -264,7 +267,7 @@ class Run:
         new lease event (the lease the runner's own audit expects, the losses and the regains)."""
         v = self.vehicle
         link = v.book.link
-        n_events, heard, was_lost = len(v.event_log), link.last_heard, link.lost
+        n_events, heard, was_lost, low = len(v.event_log), link.last_heard, link.lost, link.low
         v.tick(t)
         if was_lost:
             link = v.book.link
@@ -275,6 +278,8 @@ class Run:
                 self.announced = (e.epoch, e.current)
                 if e.reason.name == "COMMS_LOST":
                     self.losses.append((e.t, heard))
+                    silence = None if heard is None else heard + v.params["LNK_TIMEOUT"]
+                    self.loss_conditions.append(min(silence, t) if low and silence is not None else silence)
                 elif e.reason.name == "LINK_REGAINED":
                     self.regains.append((e.t, v.book.link.contact_since))
 

@@ -27,8 +27,8 @@ settings.register_profile("ci", derandomize=True, database=None)
 if os.environ.get("CI"):
     settings.load_profile("ci")
 
-SLOW = {"test_campaign.py", "test_campaign_radio.py", "test_e2e_link.py", "test_e2e_scenarios.py", "test_fuzz.py",
-        "test_golden_runs.py", "test_policies.py"}
+SLOW = {"test_campaign.py", "test_campaign_radio.py", "test_reaction_latency.py", "test_e2e_link.py",
+        "test_e2e_scenarios.py", "test_fuzz.py", "test_golden_runs.py", "test_policies.py"}
 INTEROP = {"test_campaign_ray.py", "test_cli.py", "test_console.py", "test_interop_mavproxy.py",
            "test_interop_mavsdk.py", "test_interop_pymavlink.py", "test_map.py", "test_param_file.py",
            "test_proxy_serve.py", "test_signing_cli.py", "test_signing_interop.py", "test_transports.py"}
