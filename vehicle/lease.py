@@ -469,6 +469,17 @@ class LeaseBook:
             return Outcome(self)
         return self._expire_current(t, reason)
 
+    def interrupt(self, t: float, reason: ExpireReason) -> Outcome:
+        """The robot was taken out of the book's hands from outside it (companion mode: the autopilot's pilot or its
+        own failsafe changed mode, or the autopilot stopped answering): the current lease and everything scheduled
+        behind it expire together, and a fresh operator lease waits, unclaimed, for the operator to resume
+        (DESIGN §3.6). Nothing to end (no owner, or already awaiting a claim): the same book."""
+        cur = self.current
+        if self.owner is None or cur is None or (cur.holder is Holder.OPERATOR and not cur.claimed):
+            return Outcome(self)
+        out = replace(self, leases=(cur,), queue=())._expire_current(t, reason)
+        return out._replace(dropped=self.queue + out.dropped)
+
     def issue_sublease(self, parent: LeaseId) -> tuple[LeaseBook, LeaseId]:
         """Divide the current lease: the new sublease supersedes every older one under ``parent``."""
         cur = self.current
