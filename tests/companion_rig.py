@@ -62,8 +62,10 @@ class FakeAutopilot:
                 self._ack(m, apm.MAV_RESULT_ACCEPTED)
             elif kind == "SET_POSITION_TARGET_LOCAL_NED" and self.mode == GUIDED:
                 self.speed, self.yaw_rate, self.target_at = m.vx, m.yaw_rate, t
-            elif kind == "PARAM_REQUEST_READ":
+            elif kind in ("PARAM_REQUEST_READ", "PARAM_SET"):
                 name = m.param_id if isinstance(m.param_id, str) else m.param_id.decode()
+                if kind == "PARAM_SET" and name in self.params:
+                    self.params[name] = float(m.param_value)
                 if name in self.params:
                     self._send(apm.MAVLink_param_value_message(name.encode(), self.params[name],
                                                                apm.MAV_PARAM_TYPE_INT16, len(self.params), 0))
