@@ -140,6 +140,17 @@ def test_the_owners_commands_pass_and_no_ground_heartbeat_ever_does():
     assert not from_ground  # only the companion's keepalive keeps the autopilot's failsafe quiet
 
 
+def test_arming_the_companion_instead_of_the_autopilot_is_refused_saying_where_to_send_it():
+    rig, owner = owned()
+    rig.send_as(owner, lambda m: m.command_long_encode(1, 191, apm.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 0, 0, 0, 0,
+                                                       0, 0))
+    rig.run(0.5)
+    ack = ack_for(rig, 255, apm.MAV_CMD_COMPONENT_ARM_DISARM)
+    assert ack.result == apm.MAV_RESULT_DENIED and ack.get_srcComponent() == 191
+    assert rig.ap.armed
+    assert any("send it to the autopilot (component 1)" in t for t in texts(rig))
+
+
 def test_a_plain_client_gets_the_root_by_its_first_mode_change():
     rig = booted()
     client = rig.station(255, target_comp=1)

@@ -30,6 +30,9 @@ def ftp(opcode: int, comp: int = 1):
     (cmd(rl.MAV_CMD_REQUEST_OPERATOR_CONTROL, 0), Dest.COMPANION, Access.READ),
     (cmd(rl.MAV_CMD_NAV_RETURN_TO_LINK, 0, 0), Dest.COMPANION, Access.READ),
     (cmd(apm.MAV_CMD_DO_SET_MODE, 191), Dest.COMPANION, Access.READ),  # addressed to 191: native semantics
+    (cmd(apm.MAV_CMD_COMPONENT_ARM_DISARM, 191), Dest.MISDIRECTED, Access.READ),  # only the autopilot arms
+    (enc.set_position_target_local_ned_encode(0, 1, 191, 8, 0x05C7, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0),
+     Dest.MISDIRECTED, Access.READ),
     (cmd(apm.MAV_CMD_DO_SET_MODE, 1), Dest.AUTOPILOT, Access.MODE),
     (cmd(apm.MAV_CMD_DO_SET_MODE, 0), Dest.AUTOPILOT, Access.MODE),  # a broadcast mode change is the autopilot's
     (cmd(apm.MAV_CMD_NAV_RETURN_TO_LAUNCH, 1), Dest.AUTOPILOT, Access.MODE),

@@ -155,6 +155,11 @@ class Companion:
             return
         if trusted and v is not None:
             v.heard(sender, t, header.seq)
+        if r.dest is Dest.MISDIRECTED:
+            self._refuse(m, Decision(Kind.REFUSE, apm.MAV_RESULT_DENIED, f"{router.what(m)} moves the robot: send "
+                                     f"it to the autopilot (component 1), not to the companion (191)"), sender, scomp,
+                         t)
+            return
         if r.dest is Dest.SIGNING:
             self.notice(sender, "signing", "signing setup refused: the companion's key is changed by restarting "
                          "it with --key FILE", t)

@@ -54,6 +54,7 @@ class Dest(enum.Enum):
     """Where a ground frame goes."""
 
     COMPANION = "companion"  # the companion's own endpoint: addressed to component 191, or returnlink's commands
+    MISDIRECTED = "misdirected"  # addressed to 191 but the autopilot's business (arming, setpoints): refused
     AUTOPILOT = "autopilot"  # the autopilot, if the sender may send it
     KEEP = "keep"  # the companion hears it, the autopilot never does (heartbeats: the keepalive is the backstop)
     SIGNING = "signing"  # SETUP_SIGNING: neither (a key is changed by restarting with --key)
@@ -95,6 +96,11 @@ OWNER_COMMANDS = frozenset((apm.MAV_CMD_SET_MESSAGE_INTERVAL,))
 MODE_COMMANDS = frozenset((apm.MAV_CMD_DO_SET_MODE, apm.MAV_CMD_NAV_RETURN_TO_LAUNCH, apm.MAV_CMD_MISSION_START,
                            apm.MAV_CMD_DO_SET_STANDARD_MODE))
 COMMANDS = ("COMMAND_LONG", "COMMAND_INT")
+# what moves the robot itself: the companion's endpoint would take it for its own robot, which here is the autopilot
+# and is armed and driven only by the autopilot (sent to component 191 it would be accepted and do nothing)
+ROBOT_MESSAGES = frozenset(("SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT", "RC_CHANNELS_OVERRIDE",
+                            "SET_ATTITUDE_TARGET"))
+ROBOT_COMMANDS = frozenset((apm.MAV_CMD_COMPONENT_ARM_DISARM,))
 
 
 def route(m, sysid: int) -> Route:
@@ -113,9 +119,9 @@ def route(m, sysid: int) -> Route:
     if target_system not in (None, 0, sysid):
         return Route(Dest.ELSEWHERE)
     target_component = _field(m, "target_component")
-    if target_component == COMPANION_COMPID:
-        return Route(Dest.COMPANION)
     command = m.command if kind in COMMANDS else None
+    if target_component == COMPANION_COMPID:
+        return Route(Dest.MISDIRECTED if kind in ROBOT_MESSAGES or command in ROBOT_COMMANDS else Dest.COMPANION)
     if command in OWN_COMMANDS and target_component in (None, 0):
         return Route(Dest.COMPANION)
     if target_component not in (None, 0, AUTOPILOT_COMPID):
