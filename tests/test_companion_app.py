@@ -80,6 +80,7 @@ def test_the_autopilot_reaches_the_ground_and_the_companion_does_not_duplicate_i
     positions = rig.ground_messages("LOCAL_POSITION_NED")
     assert positions and {m.get_srcComponent() for m in positions} == {1}
     assert {m.get_srcComponent() for m in rig.ground_messages("ATTITUDE")} == {1}
+    assert not [m for m in rig.ground_messages("MISSION_CURRENT") if m.get_srcComponent() == 191]
 
 
 def test_a_non_rover_autopilot_never_boots_a_vehicle():

@@ -154,3 +154,29 @@ def test_the_table_names_what_differs():
     text = report(rows)
     assert "SYSID_ENFORCE" in text and "absent" in text
     assert [r.need.fix(r.value) for r in differing(rows)] == [1.0, 5.0]
+
+
+def test_a_serial_link_moves_bytes_both_ways_and_a_missing_port_is_named():
+    import os
+    import pty
+
+    from vehicle.companion.links import open_link
+
+    master, slave = pty.openpty()
+    try:
+        link = open_link(parse_conn(f"serial:{os.ttyname(slave)}:57600"))
+        os.write(master, b"\xfd\x00")
+        deadline = time.monotonic() + 2
+        got = []
+        while not got and time.monotonic() < deadline:
+            got = link.read()
+            time.sleep(0.01)
+        assert got == [(b"\xfd\x00", None)]
+        link.write(b"ok")
+        assert os.read(master, 2) == b"ok"
+        link.close()
+    finally:
+        os.close(master)
+        os.close(slave)
+    with pytest.raises(ConnError, match="serial:/dev/no-such-port:57600"):
+        open_link(parse_conn("serial:/dev/no-such-port:57600"))

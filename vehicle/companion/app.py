@@ -35,10 +35,15 @@ from vehicle.mavlink import Endpoint
 from vehicle.params import Params
 
 NOTICE_GAP = 2.0  # s between STATUSTEXTs about the same refused stream from the same sender
-# the endpoint's own reports of what the autopilot reports better: the autopilot's copy reaches the ground already
+# the endpoint's own reports of what the autopilot reports for the same system: the autopilot's copy reaches the
+# ground already, and ground stations keep one value per message type and system, so a second copy from component
+# 191 would make their position, health, mode and mission progress flicker between the two (the return's progress
+# is in LEASE_STATUS)
 DUPLICATES = frozenset((apm.MAVLINK_MSG_ID_SYS_STATUS, apm.MAVLINK_MSG_ID_GPS_RAW_INT, apm.MAVLINK_MSG_ID_ATTITUDE,
                         apm.MAVLINK_MSG_ID_LOCAL_POSITION_NED, apm.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
-                        apm.MAVLINK_MSG_ID_HOME_POSITION, apm.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, 436))  # CURRENT_MODE
+                        apm.MAVLINK_MSG_ID_HOME_POSITION, apm.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
+                        apm.MAVLINK_MSG_ID_MISSION_CURRENT, apm.MAVLINK_MSG_ID_MISSION_ITEM_REACHED,
+                        436))  # CURRENT_MODE (development.xml)
 
 
 class Companion:

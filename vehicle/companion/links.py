@@ -166,19 +166,29 @@ class SerialLink:
 
     def __init__(self, conn: Conn) -> None:
         self.conn = conn
+        self.fd: int | None = None
+        self.next_try = 0.0
         try:
-            self.fd: int | None = os.open(conn.device, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
-            attrs = termios.tcgetattr(self.fd)
-            speed = getattr(termios, f"B{conn.baud}")
+            self._open()
+        except (OSError, termios.error) as e:
+            raise ConnError(f"cannot open {conn.text}: {getattr(e, 'strerror', None) or e}") from None
+        self.up = True
+
+    def _open(self) -> None:
+        fd = os.open(self.conn.device, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        try:
+            attrs = termios.tcgetattr(fd)
+            speed = getattr(termios, f"B{self.conn.baud}")
             attrs[0] = 0  # iflag: no translation, no flow control
             attrs[1] = 0  # oflag: raw output
             attrs[2] = termios.CS8 | termios.CREAD | termios.CLOCAL
             attrs[3] = 0  # lflag: no echo, no canonical mode, no signals
             attrs[4] = attrs[5] = speed
-            termios.tcsetattr(self.fd, termios.TCSANOW, attrs)
-        except (OSError, termios.error) as e:
-            raise ConnError(f"cannot open {conn.text}: {getattr(e, 'strerror', None) or e}") from None
-        self.up = True
+            termios.tcsetattr(fd, termios.TCSANOW, attrs)
+        except termios.error:
+            os.close(fd)
+            raise
+        self.fd = fd
 
     def fileno(self) -> int | None:
         return self.fd
@@ -193,18 +203,36 @@ class SerialLink:
         except OSError as e:
             if e.errno in (errno.EAGAIN, errno.EINTR):
                 return []
-            self.up = False  # unplugged: the loop reports the silence; nothing else to do but wait
+            self._drop()  # unplugged: the loop reports the silence, ``poll`` opens it again when it is back
             return []
         return [(data, None)] if data else []
+
+    def _drop(self) -> None:
+        if self.fd is not None:
+            with contextlib.suppress(OSError):
+                os.close(self.fd)
+        self.fd = None
+        self.up = False
+        self.next_try = time.monotonic() + RECONNECT_EVERY
 
     def write(self, data: bytes) -> None:
         if self.fd is None:
             return
-        with contextlib.suppress(BlockingIOError, OSError):
+        try:
             os.write(self.fd, data)
+        except BlockingIOError:
+            pass  # the port's buffer is full: dropped rather than queued without bound
+        except OSError:
+            self._drop()
 
     def poll(self) -> None:
-        pass
+        """Open a port that went away again (a USB adapter unplugged and back), at most every RECONNECT_EVERY s."""
+        if self.fd is not None or time.monotonic() < self.next_try:
+            return
+        self.next_try = time.monotonic() + RECONNECT_EVERY
+        with contextlib.suppress(OSError, termios.error):
+            self._open()
+            self.up = True
 
     def close(self) -> None:
         if self.fd is not None:
