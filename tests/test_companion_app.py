@@ -218,6 +218,27 @@ def test_a_mode_change_it_did_not_command_ends_the_return_and_is_not_fought():
     assert any("switched to MANUAL" in t for t in texts(rig))
 
 
+def test_the_pilot_disarming_during_a_return_ends_it_and_a_disarmed_rover_is_never_switched():
+    rig, owner = owned()
+    rig.ap.x = 20.0
+    rig.run(1)
+    silence_until_return(rig, owner)
+    assert rig.run(2, lambda: rig.ap.mode == GUIDED)
+    rig.ap.armed = False  # the pilot's disarm switch
+    rig.run(2)
+    assert not rig.companion.vehicle.book.returning
+    assert any("disarmed" in t for t in texts(rig))
+    rig.ap.mode = MANUAL
+    rig.deliver = lambda gs, t: True
+    p = owner.claim()  # the operator resumes
+    assert rig.run(4, lambda: p.done) and p.result == 0
+    assert rig.run(4, lambda: rig.companion.vehicle.book.scheduled)  # re-armed once the link is back for good
+    rig.deliver = lambda gs, t: gs is not owner  # lost again, with the rover disarmed: a return, but hands off
+    assert rig.run(6, lambda: rig.companion.vehicle.book.returning)
+    rig.run(2)
+    assert rig.ap.mode == MANUAL and not rig.companion.driver.engaged
+
+
 def test_link_regained_ends_the_return_in_hold():
     rig, owner = owned()
     rig.ap.x = 20.0

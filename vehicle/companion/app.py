@@ -279,7 +279,7 @@ class Companion:
             self.notice(0, "tick", f"companion loop fault: {type(e).__name__}: {e}; keepalive withheld", t)
             return False
         returning = v.book.returning and not self.autopilot_lost
-        if returning and not d.engaged:
+        if returning and not d.engaged and d.armed:
             self.mode_from_ground = self.preempted = False
             d.engage(t)
         elif not returning and d.engaged:

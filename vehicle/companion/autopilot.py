@@ -238,7 +238,8 @@ class AutopilotDriver:
 
     # ----- the return's hands on the autopilot -----------------------------------------------------------------
     def engage(self, t: float) -> None:
-        """A return holds the lease: GUIDED, then targets."""
+        """A return holds the lease (and the autopilot is armed: a disarmed rover's mode is its pilot's): GUIDED,
+        then targets."""
         self.engaged, self.refused = True, None
         self.mode_at_engage = self.seen.mode
         self.confirmed = self.seen.mode == GUIDED
@@ -287,6 +288,8 @@ class AutopilotDriver:
                 self._request_mode(t)
         if not self.engaged:
             return None
+        if not s.armed:
+            return "the autopilot was disarmed, not by the companion: return ended"
         if s.mode == GUIDED:
             self.confirmed = True
         elif s.mode is not None and (self.confirmed or s.mode != self.mode_at_engage):
