@@ -6,6 +6,8 @@ companion over loopback UDP as ground stations do; an observer on the firmware's
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 from gcs.plans import parse_spec
@@ -93,7 +95,9 @@ def test_killing_the_companion_mid_drive_ends_in_the_firmwares_own_hold(rig):
     owner.velocity = (2.0, 0.0)
     pump([owner, fw], 30, lambda: fw.distance() >= 8.0, "the rover 8 m out")
     comp.kill()
+    killed = time.monotonic()
     pump([owner, fw], 15, lambda: fw.mode == HOLD, "the firmware's GCS failsafe to hold the rover")
+    print(f"HOLD {time.monotonic() - killed:.1f} s after the companion was killed, {fw.distance():.1f} m out")
     assert any("GCS Failsafe" in t for t in fw.texts)
     pump([owner, fw], 5, lambda: fw.speed < 0.1, "the rover to stand still")
 
