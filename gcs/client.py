@@ -46,10 +46,12 @@ def parse_url(url: str) -> tuple[tuple[str, int], tuple[tuple[str, int], ...]]:
 class Client:
     def __init__(self, url: str = "udpin:127.0.0.1:14550", sysid: int = 255, compid: int = 190,
                  target: int = 1, clock: Callable[[], float] = time.monotonic, key: Key | None = None,
-                 wall: Callable[[], float] = time.time, sleep: Callable[[float], None] = time.sleep) -> None:
+                 wall: Callable[[], float] = time.time, sleep: Callable[[float], None] = time.sleep,
+                 target_comp: int = 1) -> None:
         """With ``key`` everything sent is signed; timestamps follow the wall clock, on a link id of this session's
         own, so two sessions of one station (``gcs watch`` beside ``gcs rtl``) are two streams, not replays.
-        ``clock`` and ``sleep`` are the time the waits run on (a test passes simulated ones)."""
+        ``clock`` and ``sleep`` are the time the waits run on (a test passes simulated ones). ``target_comp``: the
+        component addressed, 191 for returnlink running as a companion beside an autopilot."""
         bind, peers = parse_url(url)
         try:
             self.transport = UdpTransport(bind, peers)
@@ -58,7 +60,7 @@ class Client:
         self.clock, self.sleep = clock, sleep
         self.t0 = clock()
         wall0 = wall()
-        self.gs = GroundStation(sysid, compid, target, key=key, link_id=secrets.randbelow(256),
+        self.gs = GroundStation(sysid, compid, target, target_comp, key=key, link_id=secrets.randbelow(256),
                                 stamp=lambda t: stamp_from_unix(wall0 + t))
 
     def __enter__(self) -> Client:

@@ -525,6 +525,9 @@ def build_parser() -> argparse.ArgumentParser:
     from gcs import cli as gcs_cli
 
     gcs_cli.add_parser(sub)
+    from vehicle.companion import cli as companion_cli
+
+    companion_cli.add_parser(sub)
     return p
 
 

@@ -29,9 +29,10 @@ if os.environ.get("CI"):
 
 SLOW = {"test_campaign.py", "test_campaign_radio.py", "test_reaction_latency.py", "test_e2e_link.py",
         "test_e2e_scenarios.py", "test_fuzz.py", "test_golden_runs.py", "test_policies.py"}
-INTEROP = {"test_campaign_ray.py", "test_cli.py", "test_console.py", "test_interop_mavproxy.py",
-           "test_interop_mavsdk.py", "test_interop_pymavlink.py", "test_map.py", "test_param_file.py",
-           "test_proxy_serve.py", "test_signing_cli.py", "test_signing_interop.py", "test_transports.py"}
+INTEROP = {"test_campaign_ray.py", "test_cli.py", "test_companion_cli.py", "test_console.py",
+           "test_interop_mavproxy.py", "test_interop_mavsdk.py", "test_interop_pymavlink.py", "test_map.py",
+           "test_param_file.py", "test_proxy_serve.py", "test_signing_cli.py", "test_signing_interop.py",
+           "test_transports.py"}
 FIRMWARE_WORD = "firmware"  # test_firmware*.py: they start the real firmware
 # tests of an interop file that run in-process in simulated time
 FAST_IN_INTEROP = {"test_shell_keeps_the_link_through_a_10_s_idle", "test_one_shot_and_shell_share_one_command_table"}

@@ -26,6 +26,7 @@ from vehicle.control import ControlLoop
 from vehicle.io import RobotDriver
 from vehicle.lease import (
     Check,
+    ExpireReason,
     Holder,
     LeaseBook,
     LeaseConfig,
@@ -251,6 +252,19 @@ class Vehicle:
             return Check(Verdict.EXECUTE, self.book.current_id, detail="a return is already running")
         self.apply(self.book.schedule_plan(self._blocks(blocks_from_items(items, self.params)), t, store=False))
         return self.rtl(sender, compid, t)
+
+    def preempt(self, t: float, reason: ExpireReason, why: str) -> bool:
+        """The robot left the vehicle's hands from outside the lease book (companion mode: an autopilot's pilot or
+        failsafe changed its mode, or the autopilot stopped answering): the current lease and its chain end with
+        ``reason``, said in words by ``why``, and a fresh operator lease waits for a claim. A return never fights
+        whoever took the robot. True if a lease ended (and ``why`` was announced)."""
+        out = self.book.interrupt(t, reason)
+        if not out.events:
+            return False
+        self.notices.append(why)
+        self.setpoint = None
+        self.apply(out)
+        return True
 
     def set_plan_start(self, seq: int, sender: int, compid: int, t: float) -> str | None:
         """MISSION_SET_CURRENT / DO_SET_MISSION_CURRENT: the return plan is scheduled from the block holding

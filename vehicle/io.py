@@ -32,6 +32,9 @@ class Readings(NamedTuple):
 
 
 class RobotDriver(Protocol):
+    """``mav_type`` is the HEARTBEAT type the vehicle reports; a driver may also carry ``mav_autopilot`` (the
+    HEARTBEAT autopilot field, MAV_AUTOPILOT_GENERIC when absent), as the companion's does."""
+
     mav_type: int
 
     def command(self, speed: float, yaw_rate: float) -> None: ...

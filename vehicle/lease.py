@@ -196,6 +196,17 @@ class LeaseBook:
     def finish(self, index: int, reason: ExpireReason, t: float) -> Outcome:
         return lease_ledger.finish(self, index, reason, t)
 
+    def interrupt(self, t: float, reason: ExpireReason) -> Outcome:
+        """The robot was taken out of the book's hands from outside it (companion mode: the autopilot's pilot or its
+        own failsafe changed mode, or the autopilot stopped answering): the current lease and everything scheduled
+        behind it expire together, and a fresh operator lease waits, unclaimed, for the operator to resume
+        (docs/architecture.md §3.6). Nothing to end (no owner, or already awaiting a claim): the same book."""
+        cur = self.current
+        if self.owner is None or cur is None or (cur.holder is Holder.OPERATOR and not cur.claimed):
+            return Outcome(self)
+        out = lease_ledger.advance(replace(self, leases=(cur,), queue=()), t, reason)
+        return out._replace(dropped=self.queue + out.dropped)
+
     def issue_sublease(self, parent: LeaseId) -> tuple[LeaseBook, LeaseId]:
         return lease_ledger.issue_sublease(self, parent)
 

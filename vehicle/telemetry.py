@@ -184,7 +184,10 @@ class Telemetry:
         elif state in (State.RETURNING, State.NAVIGATING):
             base |= mav.MAV_MODE_FLAG_AUTO_ENABLED
         system_status = mav.MAV_STATE_ACTIVE if v.armed else mav.MAV_STATE_STANDBY
-        self.mav.send(mav.MAVLink_heartbeat_message(v.driver.mav_type, mav.MAV_AUTOPILOT_GENERIC, base,
+        # a driver may say what it is besides its type: a companion beside an autopilot is MAV_AUTOPILOT_INVALID,
+        # so ground stations take the autopilot's heartbeat, not this one, as the vehicle's (DESIGN §11)
+        autopilot = getattr(v.driver, "mav_autopilot", mav.MAV_AUTOPILOT_GENERIC)
+        self.mav.send(mav.MAVLink_heartbeat_message(v.driver.mav_type, autopilot, base,
                                                     self.custom_mode(), system_status, MAVLINK_VERSION))
 
     def _sys_status(self, t: float) -> None:
