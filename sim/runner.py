@@ -30,6 +30,7 @@ from link.proxy import RadioReport
 from link.radio import LinkState, Radio
 from link.transports import LockstepBus
 from sim.driver import simulated_vehicle
+from sim.jams import Jams
 from sim.operator import Operator
 from sim.policies import DEFAULT_POLICY, check_policy, make_policy
 from sim.policies.base import Baseline
@@ -164,7 +165,7 @@ class Run:
         op.operator = Operator(op.gs, sc.route, sc.resume_route, from_plan_items(sc.plan), sc.teleop,
                                    attempts=sc.attempts)
         self.events = sorted(sc.events, key=lambda e: e.t)
-        self.jams: list[tuple[float, float, str]] = []  # (from, until, station or "")
+        self.jams = Jams()
         self.t = 0.0
         self.ticks = 0
         self.duration = sc.duration if duration is None else duration
@@ -320,9 +321,7 @@ class Run:
                     bus.send(st.name, "vehicle", data, at)
 
     def _jammed(self, station: str, t: float) -> bool:
-        if not self.jams:  # most runs have none: skip the generator on every transmit
-            return False
-        return any(a <= t < b and (not s or s == station) for a, b, s in self.jams)
+        return self.jams.jammed(station, t)
 
     def _radio_status(self, t: float) -> None:
         """The operator's telemetry radio reports both ends' RSSI, as a SiK radio would."""
@@ -343,9 +342,9 @@ class Run:
             name = ev.station or self.scenario.operator_station
             st = self.stations.get(name)
             if ev.action == "jam":
-                self.jams.append((ev.t, ev.t + (ev.duration or math.inf), ev.station))
+                self.jams.jam(ev.t, ev.duration, ev.station)
             elif ev.action == "unjam":
-                self.jams = [(a, min(b, t), s) for a, b, s in self.jams]
+                self.jams.unjam(t)
             elif ev.action == "kill_gcs" and st is not None:
                 st.alive = False
             elif ev.action == "revive_gcs" and st is not None:

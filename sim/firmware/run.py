@@ -32,6 +32,7 @@ from link.radio import LinkState, Radio, subsystem_rng
 from link.transports import LockstepBus
 from sim.firmware.lockstep import DT, MODE_NAMES, SKID_PARAMS, SPEEDUP, Lockstep
 from sim.firmware.operator import FirmwareOperator
+from sim.jams import Jams
 from sim.robots import make_robot
 from sim.runner import TLOG_EPOCH_US
 from sim.scenario import Scenario
@@ -108,7 +109,7 @@ class FirmwareRun:
                                          sysid=sc.station(sc.operator_station).sysid)
         self.op_station.operator = self.operator
         self.events = sorted(sc.events, key=lambda e: e.t)
-        self.jams: list[tuple[float, float, str]] = []
+        self.jams = Jams()
         self.t = 0.0
         self.heard: list[float] = []  # scenario times at which the firmware received a frame from the owner
         # per tick: (t, true x, true y, est x, est y, mode, link delivery, rssi, speed cmd, yaw rate cmd, armed,
@@ -222,16 +223,16 @@ class FirmwareRun:
         self.tlog.append(_TLOG_STAMP(TLOG_EPOCH_US + int(t * 1e6)) + data)
 
     def _jammed(self, station: str, t: float) -> bool:
-        return bool(self.jams) and any(a <= t < b and (not s or s == station) for a, b, s in self.jams)
+        return self.jams.jammed(station, t)
 
     def _events(self, t: float) -> None:
         while self.events and self.events[0].t <= t + 1e-9:
             ev = self.events.pop(0)
             st = self.stations.get(ev.station or self.scenario.operator_station)
             if ev.action == "jam":
-                self.jams.append((ev.t, ev.t + (ev.duration or math.inf), ev.station))
+                self.jams.jam(ev.t, ev.duration, ev.station)
             elif ev.action == "unjam":
-                self.jams = [(a, min(b, t), s) for a, b, s in self.jams]
+                self.jams.unjam(t)
             elif ev.action == "kill_gcs" and st is not None:
                 st.alive = False
             elif ev.action == "revive_gcs" and st is not None:
