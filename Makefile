@@ -5,8 +5,12 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 # the map test drives Debian's chromium (root in CI; sudo on a developer's machine)
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+# the ArduPilot Rover SITL for the firmware tests and benchmark: RETURNLINK_ARDUROVER if set, else the one shared
+# beside this checkout, if any (none: the firmware tests skip and say so; .ci/run always sets it)
+RETURNLINK_ARDUROVER ?= $(abspath $(wildcard ../shared/ardupilot/ardurover))
+export RETURNLINK_ARDUROVER
 
-.PHONY: demo test bench fuzz lint venv clean
+.PHONY: demo test test-fast bench fuzz lint venv clean
 
 $(STAMP): pyproject.toml
 	test -x /usr/bin/chromium || { $(SUDO) apt-get update && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y chromium; }
@@ -24,6 +28,11 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest
+
+# the pure cores, their properties and the in-process protocol tests (tiers: tests/conftest.py), under a minute
+test-fast: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/python -m pytest -m "not slow and not interop and not firmware"
 
 bench: $(STAMP)
 	@for b in benchmarks/*_bench.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done

@@ -5,7 +5,7 @@ twice: in this process (the trial's own CPU cost, what a core can do at best) an
 core (what a sweep gets, start-up, worker imports and result transport included, counted as wall time x workers,
 so it is the lower figure, and meaningless on a machine busy with other work: the load average is printed).
 
-Aim (DESIGN §8): at least 1,500 trials of 200 simulated s per hour per core.
+Aim (docs/architecture.md §8): at least 1,500 trials of 200 simulated s per hour per core.
 """
 
 from __future__ import annotations

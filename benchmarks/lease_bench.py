@@ -1,4 +1,5 @@
-"""Lease enforcement and transition throughput on one core (DESIGN §8: aim >= 200,000 checks/s in CPython)."""
+"""Lease enforcement and transition throughput on one core (docs/architecture.md §8: aim >= 200,000 checks/s in
+CPython)."""
 
 from __future__ import annotations
 

@@ -22,6 +22,8 @@ def add_parser(sub) -> None:
     g.add_argument("--sysid", type=types.SYSID, default=255, help="this ground station's MAVLink system id")
     g.add_argument("--compid", type=types.COMPID, default=190, help="this ground station's component id")
     g.add_argument("--target", type=types.SYSID, default=1, help="the vehicle's system id")
+    g.add_argument("--target-comp", type=types.COMPID, default=1,
+                   help="the component addressed: 1, or 191 for returnlink running as a companion (leases, plans)")
     g.add_argument("--timeout", type=types.SECONDS, default=10.0, help="seconds to wait for the vehicle")
     g.add_argument("--key", help="signing key file (64 hex characters): sign everything, believe only the "
                    "vehicle's signed frames")
@@ -44,12 +46,12 @@ def _open_client(args: argparse.Namespace):
     except GcsError as e:
         raise UsageError(f"--url: {e}") from None
     key = _signing_key(args)
-    return Client(args.url, args.sysid, args.compid, target=args.target, key=key)
+    return Client(args.url, args.sysid, args.compid, target=args.target, key=key, target_comp=args.target_comp)
 
 
 def _signing_key(args: argparse.Namespace):
-    """The key of ``--key FILE`` where that option exists (DESIGN §4.1); a damaged or missing file is a usage
-    error naming the file and line, reported before any link opens."""
+    """The key of ``--key FILE`` where that option exists (docs/architecture.md §4.1); a damaged or missing file is a
+    usage error naming the file and line, reported before any link opens."""
     path = getattr(args, "key", None)
     if not path:
         return None

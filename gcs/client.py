@@ -46,18 +46,21 @@ def parse_url(url: str) -> tuple[tuple[str, int], tuple[tuple[str, int], ...]]:
 class Client:
     def __init__(self, url: str = "udpin:127.0.0.1:14550", sysid: int = 255, compid: int = 190,
                  target: int = 1, clock: Callable[[], float] = time.monotonic, key: Key | None = None,
-                 wall: Callable[[], float] = time.time) -> None:
+                 wall: Callable[[], float] = time.time, sleep: Callable[[float], None] = time.sleep,
+                 target_comp: int = 1) -> None:
         """With ``key`` everything sent is signed; timestamps follow the wall clock, on a link id of this session's
-        own, so two sessions of one station (``gcs watch`` beside ``gcs rtl``) are two streams, not replays."""
+        own, so two sessions of one station (``gcs watch`` beside ``gcs rtl``) are two streams, not replays.
+        ``clock`` and ``sleep`` are the time the waits run on (a test passes simulated ones). ``target_comp``: the
+        component addressed, 191 for returnlink running as a companion beside an autopilot."""
         bind, peers = parse_url(url)
         try:
             self.transport = UdpTransport(bind, peers)
         except OSError as e:
             raise GcsError(f"cannot open {url}: {e}") from None
-        self.clock = clock
+        self.clock, self.sleep = clock, sleep
         self.t0 = clock()
         wall0 = wall()
-        self.gs = GroundStation(sysid, compid, target, key=key, link_id=secrets.randbelow(256),
+        self.gs = GroundStation(sysid, compid, target, target_comp, key=key, link_id=secrets.randbelow(256),
                                 stamp=lambda t: stamp_from_unix(wall0 + t))
 
     def __enter__(self) -> Client:
@@ -84,7 +87,7 @@ class Client:
                 self.transport.send(frame)
             if self.now >= end:
                 return
-            time.sleep(POLL)
+            self.sleep(POLL)
 
     def wait_for(self, predicate: Callable[[], bool], timeout: float, what: str) -> None:
         end = self.now + timeout
@@ -92,7 +95,7 @@ class Client:
             if self.now >= end:
                 raise GcsError(f"timed out after {timeout:g} s waiting for {what}")
             self.pump()
-            time.sleep(POLL)
+            self.sleep(POLL)
 
     # ----- connection and status -----------------------------------------------------------------------------
     def connect(self, timeout: float = 10.0) -> None:

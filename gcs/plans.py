@@ -12,7 +12,9 @@ import math
 from link.mission import Item, Origin
 from link.plan_items import (
     LEASE_BOUNDARY,
+    LOCAL_FRAMES,
     MISSION_FRAME,
+    NAMES,
     NAV_LOITER_TIME,
     NAV_RETURN_TO_LAUNCH,
     NAV_RETURN_TO_LINK,
@@ -22,6 +24,7 @@ from link.plan_items import (
 )
 
 WPL_HEADER = "QGC WPL 110"
+LOCAL_NED = LOCAL_FRAMES[0]  # MAV_FRAME_LOCAL_NED: the frame of a waypoint given in metres north and east
 
 
 class PlanError(ValueError):
@@ -63,7 +66,9 @@ def parse_spec(text: str, origin: Origin | None = None) -> list[Item]:
             elif name == "launch" and not nums:
                 new = item(len(items), NAV_RETURN_TO_LAUNCH)
             elif name == "wp" and len(nums) == 2 and all(math.isfinite(v) and abs(v) < 1e6 for v in nums):
-                new = item(len(items), NAV_WAYPOINT, frame=1, x=round(nums[0] * 1e4), y=round(nums[1] * 1e4))
+                scale = position_scale(LOCAL_NED)
+                new = item(len(items), NAV_WAYPOINT, frame=LOCAL_NED, x=round(nums[0] * scale),
+                           y=round(nums[1] * scale))
             else:
                 raise PlanError(f"{word!r}: expected rtl[:disp[:speed[:target[:on_regain]]]], loiter:S, launch "
                                 f"or wp:N:E")
@@ -109,10 +114,6 @@ def write_wpl(items: list[Item]) -> str:
     return "\n".join(out) + "\n"
 
 
-NAMES = {NAV_RETURN_TO_LINK: "RETURN_TO_LINK", LEASE_BOUNDARY: "LEASE_BOUNDARY", NAV_LOITER_TIME: "LOITER_TIME",
-         NAV_RETURN_TO_LAUNCH: "RETURN_TO_LAUNCH", NAV_WAYPOINT: "WAYPOINT"}
-
-
 def describe(items: list[Item]) -> str:
     lines = []
     lease = 0
@@ -133,8 +134,9 @@ def from_plan_items(plan) -> list[Item]:
     out = []
     for k, p in enumerate(plan):
         if p.command == NAV_WAYPOINT:
-            out.append(item(k, p.command, p.param1, p.param2, p.param3, p.param4, frame=1,
-                            x=round(p.x * 1e4), y=round(p.y * 1e4)))
+            scale = position_scale(LOCAL_NED)
+            out.append(item(k, p.command, p.param1, p.param2, p.param3, p.param4, frame=LOCAL_NED,
+                            x=round(p.x * scale), y=round(p.y * scale)))
         else:
             out.append(item(k, p.command, p.param1, p.param2, p.param3, p.param4))
     return out

@@ -18,6 +18,7 @@ import shlex
 import sys
 import threading
 import time
+from collections.abc import Callable
 from typing import TextIO
 
 from gcs.client import Client
@@ -49,9 +50,12 @@ def line_parser() -> argparse.ArgumentParser:
 class Session:
     """One long-lived station: the client, a lock around it, and the background thread that keeps it talking."""
 
-    def __init__(self, client: Client, out: TextIO = sys.stdout) -> None:
+    def __init__(self, client: Client, out: TextIO = sys.stdout,
+                 sleep: Callable[[float], None] = time.sleep) -> None:
+        """``sleep``: how the background thread waits between exchanges (a test passes simulated time)."""
         self.client = client
         self.out = out
+        self.sleep = sleep
         self.lock = threading.RLock()
         self.shown_events = len(client.gs.events)
         self.shown_texts = len(client.gs.texts)
@@ -72,7 +76,7 @@ class Session:
             with self.lock:
                 self.client.pump()
                 self.report()
-            time.sleep(IDLE_PUMP)
+            self.sleep(IDLE_PUMP)
 
     def report(self) -> None:
         """Print the lease events and STATUSTEXTs that arrived since the last report."""

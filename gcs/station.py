@@ -10,27 +10,27 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
+from gcs.mission_transfer import MissionClient, Transfer
 from link import dialect
 from link.codec import read_frames
-from link.mission import Item, item_from_message
+from link.mission import Item
+from link.modes import PX4_AUTO, PX4_AUTO_LOITER
 from link.setpoints import VELOCITY, VELOCITY_YAW_RATE
-from link.signing import Key, Streams, Verdict, advance, enable, sim_stamp
-from link.wire import MAVLINK_VERSION
+from link.signing import Key, SigningVerdict, Streams, advance, enable, sim_stamp
+from link.wire import MAVLINK_VERSION, NO_INDEX
 
 mav = dialect.load()
 
 COMMAND_RETRY = 1.0  # s between retries of an unanswered command
 COMMAND_TRIES = 4
 TELEOP_PERIOD = 0.1  # s: teleop is streamed at 10 Hz
-TRANSFER_TIMEOUT = 1.5
-TRANSFER_TRIES = 4
 STOPPED = ("velocity", 0.0, 0.0, math.nan)  # the teleop stream of a station holding still (zero velocity)
-_UNRESOLVED = object()  # a message type whose handler has not been looked up yet
 # the dialect's message types that carry a target_system, by name: most of the vehicle's telemetry does not, and
 # asking each of those frames for the field would cost a failed attribute lookup per frame
 TARGETED = frozenset(cls.msgname for cls in mav.mavlink_map.values() if "target_system" in cls.fieldnames)
+# SET_POSITION_TARGET_LOCAL_NED for a velocity (and a yaw rate unless that is ignored too): every other field ignored
 
 
 @dataclass(frozen=True)
@@ -99,27 +99,8 @@ class Pending:
 
 
 @dataclass
-class Transfer:
-    """A mission upload or download in progress."""
-
-    kind: str  # "upload" | "download"
-    mission_type: int
-    items: list[Item]
-    count: int
-    last_at: float
-    tries: int = 1
-    done: bool = False
-    result: int | None = None
-    expected: int = 0
-
-    @property
-    def ok(self) -> bool:
-        return self.done and self.result == 0
-
-
-@dataclass
-class Vehicle:
-    """What the station knows of the vehicle it talks to."""
+class VehicleView:
+    """What the station knows of the vehicle it talks to (the vehicle itself is ``vehicle.app.Vehicle``)."""
 
     sysid: int = 0
     compid: int = 0
@@ -139,25 +120,25 @@ class Vehicle:
 class GroundStation:
     def __init__(self, sysid: int = 255, compid: int = 190, target: int = 1, target_comp: int = 1,
                  key: Key | None = None, link_id: int = 0, stamp: Callable[[float], int] = sim_stamp) -> None:
-        """With ``key`` every frame sent is signed (DESIGN §4.1) and only the vehicle's frames signed with the same
-        key are believed; ``stamp(t)`` is the signing clock (the wall clock for a real station)."""
+        """With ``key`` every frame sent is signed (docs/architecture.md §4.1) and only the vehicle's frames signed
+        with the same key are believed; ``stamp(t)`` is the signing clock (the wall clock for a real station)."""
         self.sysid, self.compid = sysid, compid
         self.target, self.target_comp = target, target_comp
         self.frames: list[bytes] = []
         self.mav = mav.MAVLink(self, sysid, compid)
         self.key, self.stamp = key, stamp
         self.streams = Streams()
-        self.refused: Counter = Counter()  # the vehicle's frames not believed, per signing Verdict
+        self.refused: Counter = Counter()  # the vehicle's frames not believed, per SigningVerdict
         if key is not None:
             enable(self.mav, key, stamp(0.0), link_id)
         self.parser = mav.MAVLink(None, 0, 0)
         self.parser.robust_parsing = True
-        self.vehicle = Vehicle()
+        self.vehicle = VehicleView()
         self.pending: dict[int, Pending] = {}
         # no later than the oldest send of a command still unanswered (inf: none): until COMMAND_RETRY after it,
         # no retry can be due, and the tick need not walk every command ever sent
         self._oldest_unanswered = math.inf
-        self.transfer: Transfer | None = None
+        self.missions = MissionClient(self.mav, target, target_comp)  # the mission protocol's ground side
         self.events: list[LeaseEventRecord] = []
         self.texts: list[tuple[float, str]] = []
         self._chunks: dict[int, dict[int, bytes]] = {}
@@ -166,7 +147,6 @@ class GroundStation:
         self.teleop: tuple[str, float, float, float] | None = None  # (kind, a, b, c) streamed at 10 Hz
         self.next_teleop = 0.0
         self.listeners: list[Callable[[object, float], None]] = []
-        self._handlers: dict[str, Callable[[object, float], None] | None] = {}  # message type -> its _on_ method
         self.t = 0.0
 
     # pymavlink writes encoded frames here
@@ -203,8 +183,7 @@ class GroundStation:
                         p.sent_at = t
                         self._send_command(p, confirmation=p.tries - 1)
             self._oldest_unanswered = min((p.sent_at for p in self.pending.values() if not p.done), default=math.inf)
-        if self.transfer is not None and not self.transfer.done:
-            self._transfer_tick(t)
+        self.missions.tick(t)
         if self.teleop is not None and t >= self.next_teleop:
             self.next_teleop = t + TELEOP_PERIOD
             self._send_teleop()
@@ -245,7 +224,7 @@ class GroundStation:
 
     def hold(self) -> Pending:
         self.teleop = None
-        return self.command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, 3)
+        return self.command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, PX4_AUTO, PX4_AUTO_LOITER)
 
     def arm(self, armed: bool = True) -> Pending:
         return self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, float(armed))
@@ -268,14 +247,13 @@ class GroundStation:
     def _send_teleop(self) -> None:
         assert self.teleop is not None
         kind, a, b, c = self.teleop
-        # the message object straight to ``send``: what ``<name>_send`` does, two calls fewer at 10 Hz
         if kind == "manual":
-            self.mav.send(mav.MAVLink_manual_control_message(self.target, int(a * 1000), 0, 500, int(b * 1000), 0))
+            self.mav.manual_control_send(self.target, int(a * 1000), 0, 500, int(b * 1000), 0)
         else:
             mask = VELOCITY if math.isnan(c) else VELOCITY_YAW_RATE
-            self.mav.send(mav.MAVLink_set_position_target_local_ned_message(
+            self.mav.set_position_target_local_ned_send(
                 0, self.target, self.target_comp, mav.MAV_FRAME_LOCAL_NED, mask, 0, 0, 0, a, b, 0, 0, 0, 0, 0,
-                0.0 if math.isnan(c) else c))
+                0.0 if math.isnan(c) else c)
 
     # ----- parameters ----------------------------------------------------------------------------------------
     def param_request_all(self) -> None:
@@ -292,7 +270,7 @@ class GroundStation:
     def rotate_key(self, new: Key) -> None:
         """SETUP_SIGNING signed with the current key, then sign with ``new`` (the vehicle answers with its new key).
 
-        A vehicle takes a new key only over a link already signed with its installed one (DESIGN §4.1)."""
+        A vehicle takes a new key only over a link already signed with its installed one (docs/architecture.md §4.1)."""
         if self.key is None:
             raise ValueError("key rotation needs the vehicle's current key")
         ts = advance(self.mav, self.stamp(self.t))
@@ -300,40 +278,24 @@ class GroundStation:
         self.key = new
         enable(self.mav, new, ts + 1, self.mav.signing.link_id)
 
-    # ----- missions ------------------------------------------------------------------------------------------
+    # ----- missions (gcs/mission_transfer.py) ---------------------------------------------------------------
+    @property
+    def transfer(self) -> Transfer | None:
+        """The mission transfer in progress or last finished (None: none yet, or abandoned)."""
+        return self.missions.transfer
+
+    @transfer.setter
+    def transfer(self, value: Transfer | None) -> None:
+        self.missions.transfer = value
+
     def upload(self, items: list[Item], mission_type: int = 0) -> Transfer:
-        items = [replace(it, seq=k, mission_type=mission_type) for k, it in enumerate(items)]
-        self.transfer = Transfer("upload", mission_type, items, len(items), self.t)
-        self.mav.mission_count_send(self.target, self.target_comp, len(items), mission_type)
-        return self.transfer
+        return self.missions.upload(items, mission_type, self.t)
 
     def download(self, mission_type: int = 0) -> Transfer:
-        self.transfer = Transfer("download", mission_type, [], -1, self.t)
-        self.mav.mission_request_list_send(self.target, self.target_comp, mission_type)
-        return self.transfer
+        return self.missions.download(mission_type, self.t)
 
     def clear(self, mission_type: int = 0) -> Transfer:
-        self.transfer = Transfer("clear", mission_type, [], 0, self.t)
-        self.mav.mission_clear_all_send(self.target, self.target_comp, mission_type)
-        return self.transfer
-
-    def _transfer_tick(self, t: float) -> None:
-        tr = self.transfer
-        if tr is None or tr.done or t - tr.last_at < TRANSFER_TIMEOUT:
-            return
-        if tr.tries >= TRANSFER_TRIES:
-            tr.done, tr.result = True, None
-            return
-        tr.tries += 1
-        tr.last_at = t
-        if tr.kind == "upload":
-            self.mav.mission_count_send(self.target, self.target_comp, tr.count, tr.mission_type)
-        elif tr.kind == "clear":
-            self.mav.mission_clear_all_send(self.target, self.target_comp, tr.mission_type)
-        elif tr.count < 0:
-            self.mav.mission_request_list_send(self.target, self.target_comp, tr.mission_type)
-        else:
-            self.mav.mission_request_int_send(self.target, self.target_comp, len(tr.items), tr.mission_type)
+        return self.missions.clear(mission_type, self.t)
 
     # ----- incoming ------------------------------------------------------------------------------------------
     def _handle(self, m, t: float) -> None:
@@ -348,15 +310,14 @@ class GroundStation:
         if self.key is not None:
             own = advance(self.mav, self.stamp(t))
             self.streams, verdict = self.streams.verify(self.key, bytes(m.get_msgbuf()), own)
-            if verdict is not Verdict.ACCEPT:
+            if verdict is not SigningVerdict.ACCEPT:
                 self.refused[verdict] += 1  # a forged ACK or status must not be believed
                 return
         self.vehicle.last_heard = t
         if kind in TARGETED and m.target_system != 0 and m.target_system != self.sysid:
             return  # addressed to another station
-        handler = self._handlers.get(kind, _UNRESOLVED)
-        if handler is _UNRESOLVED:  # the first message of a kind names its handler; later ones look it up
-            handler = self._handlers[kind] = getattr(self, f"_on_{kind.lower()}", None)
+        name = kind.lower()
+        handler = getattr(self, f"_on_{name}", None) or getattr(self.missions, f"on_{name}", None)
         if handler is not None:
             handler(m, t)
         for fn in self.listeners:
@@ -388,8 +349,8 @@ class GroundStation:
         reason = mav.enums["LEASE_EXPIRE_REASON"].get(m.reason)
         holder = mav.enums["LEASE_HOLDER"].get(m.holder)
         self.events.append(LeaseEventRecord(
-            t, m.epoch, None if m.expired_index == 65535 else m.expired_index,
-            None if m.current_index == 65535 else m.current_index,
+            t, m.epoch, None if m.expired_index == NO_INDEX else m.expired_index,
+            None if m.current_index == NO_INDEX else m.current_index,
             reason.name.removeprefix("LEASE_EXPIRE_REASON_") if reason else str(m.reason),
             holder.name.removeprefix("LEASE_HOLDER_") if holder else str(m.holder)))
 
@@ -420,46 +381,3 @@ class GroundStation:
         name = m.param_id if isinstance(m.param_id, str) else m.param_id.decode("ascii", "replace")
         self.vehicle.params[name.split("\x00", 1)[0]] = float(m.param_value)
         self.vehicle.param_count = m.param_count
-
-    def _on_mission_request_int(self, m, t: float) -> None:
-        tr = self.transfer
-        if tr is None or tr.kind != "upload" or tr.done or m.mission_type != tr.mission_type:
-            return
-        if not 0 <= m.seq < len(tr.items):
-            return
-        tr.last_at, tr.tries = t, 1
-        it = tr.items[m.seq]
-        self.mav.mission_item_int_send(self.target, self.target_comp, it.seq, it.frame, it.command, it.current,
-                                       it.autocontinue, it.param1, it.param2, it.param3, it.param4, it.x, it.y,
-                                       it.z, tr.mission_type)
-
-    _on_mission_request = _on_mission_request_int
-
-    def _on_mission_ack(self, m, t: float) -> None:
-        tr = self.transfer
-        if tr is None or tr.done or m.mission_type != tr.mission_type or tr.kind == "download":
-            return
-        tr.done, tr.result = True, m.type
-
-    def _on_mission_count(self, m, t: float) -> None:
-        tr = self.transfer
-        if tr is None or tr.kind != "download" or tr.done or m.mission_type != tr.mission_type:
-            return
-        tr.count, tr.last_at, tr.tries = m.count, t, 1
-        if m.count == 0:
-            tr.done, tr.result = True, 0
-            self.mav.mission_ack_send(self.target, self.target_comp, 0, tr.mission_type)
-            return
-        self.mav.mission_request_int_send(self.target, self.target_comp, 0, tr.mission_type)
-
-    def _on_mission_item_int(self, m, t: float) -> None:
-        tr = self.transfer
-        if tr is None or tr.kind != "download" or tr.done or m.seq != len(tr.items):
-            return
-        tr.items.append(item_from_message(m))
-        tr.last_at, tr.tries = t, 1
-        if len(tr.items) == tr.count:
-            tr.done, tr.result = True, 0
-            self.mav.mission_ack_send(self.target, self.target_comp, 0, tr.mission_type)
-        else:
-            self.mav.mission_request_int_send(self.target, self.target_comp, len(tr.items), tr.mission_type)

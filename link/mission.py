@@ -1,5 +1,5 @@
-"""Mission items as they travel (DESIGN §4): the MISSION_ITEM_INT form and the local frame's origin, shared by the
-vehicle's mission server and the ground station's client.
+"""Mission items as they travel (docs/architecture.md §4): the MISSION_ITEM_INT form and the local frame's origin,
+shared by the vehicle's mission server and the ground station's client.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The parameter table of DESIGN §5 and the .parm text format (MAVProxy/ArduPilot), shared by both ends.
+"""The parameter table of docs/architecture.md §5 and the .parm text format (MAVProxy/ArduPilot), shared by both ends.
 
 The names, defaults, ranges and meanings are part of the interface contract: the vehicle enforces them, and a
 ground station, a scenario file or a campaign spec checks a value against the same table before it sends or runs
@@ -43,6 +43,12 @@ SPECS: tuple[ParamSpec, ...] = (
               "owner's packet delivery below this for LNK_TIMEOUT also counts as lost (0 = silence only)"),
 )
 BY_NAME = {s.name: s for s in SPECS}
+
+
+def default(name: str) -> float:
+    """The contract default of ``name``: every feature's Config takes its defaults from here, so the table above
+    is the one place a default is written (``params/returnlink.parm`` is kept in step with it by a test)."""
+    return BY_NAME[name].default
 
 
 class ParamError(ValueError):

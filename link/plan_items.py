@@ -16,22 +16,33 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-# MAV_CMD numbers of the items a return plan may hold (the dialect defines 44002 and 44003)
-NAV_WAYPOINT = 16
-NAV_LOITER_TIME = 19
-NAV_RETURN_TO_LAUNCH = 20
-NAV_RETURN_TO_LINK = 44002
-LEASE_BOUNDARY = 44003
+from link import dialect
+
+mav = dialect.load()
+
+# MAV_CMD numbers of the items a return plan may hold (RETURN_TO_LINK and LEASE_BOUNDARY are returnlink's own)
+NAV_WAYPOINT = mav.MAV_CMD_NAV_WAYPOINT
+NAV_LOITER_TIME = mav.MAV_CMD_NAV_LOITER_TIME
+NAV_RETURN_TO_LAUNCH = mav.MAV_CMD_NAV_RETURN_TO_LAUNCH
+NAV_RETURN_TO_LINK = mav.MAV_CMD_NAV_RETURN_TO_LINK
+LEASE_BOUNDARY = mav.MAV_CMD_LEASE_BOUNDARY
 
 # MAV_FRAME groups: how MISSION_ITEM_INT's integer x/y are scaled in each
-GLOBAL_FRAMES = (0, 3, 5, 6, 10, 11)  # MAV_FRAME_GLOBAL*, x/y are lat/lon (degE7 in MISSION_ITEM_INT)
-LOCAL_FRAMES = (1, 7)  # MAV_FRAME_LOCAL_NED / LOCAL_FRD; x/y are metres * 1e4
-MISSION_FRAME = 2  # MAV_FRAME_MISSION: x/y are the raw numbers of a command without a position
-KNOWN_FRAMES = tuple(range(22))  # MAV_FRAME 0..21 of common.xml
+GLOBAL_FRAMES = (mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT, mav.MAV_FRAME_GLOBAL_INT,
+                 mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mav.MAV_FRAME_GLOBAL_TERRAIN_ALT,
+                 mav.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT)  # x/y are lat/lon (degE7 in MISSION_ITEM_INT)
+LOCAL_FRAMES = (mav.MAV_FRAME_LOCAL_NED, mav.MAV_FRAME_LOCAL_OFFSET_NED)  # x/y are metres * 1e4
+MISSION_FRAME = mav.MAV_FRAME_MISSION  # x/y are the raw numbers of a command without a position
+KNOWN_FRAMES = tuple(sorted(v for v in mav.enums["MAV_FRAME"] if v != mav.MAV_FRAME_ENUM_END))
 
 # MAV_MISSION_RESULT codes a refused item is answered with
-MISSION_UNSUPPORTED_FRAME, MISSION_UNSUPPORTED, MISSION_INVALID = 2, 3, 5
-MISSION_INVALID_PARAM = {1: 6, 2: 7, 3: 8, 4: 9, 5: 10, 6: 11, 7: 12}  # INVALID_PARAM1..4, PARAM5_X, PARAM6_Y, PARAM7
+MISSION_UNSUPPORTED_FRAME = mav.MAV_MISSION_UNSUPPORTED_FRAME
+MISSION_UNSUPPORTED = mav.MAV_MISSION_UNSUPPORTED
+MISSION_INVALID = mav.MAV_MISSION_INVALID
+MISSION_INVALID_PARAM = {1: mav.MAV_MISSION_INVALID_PARAM1, 2: mav.MAV_MISSION_INVALID_PARAM2,
+                         3: mav.MAV_MISSION_INVALID_PARAM3, 4: mav.MAV_MISSION_INVALID_PARAM4,
+                         5: mav.MAV_MISSION_INVALID_PARAM5_X, 6: mav.MAV_MISSION_INVALID_PARAM6_Y,
+                         7: mav.MAV_MISSION_INVALID_PARAM7}
 
 MAX_DISPLACEMENT = 10000.0  # m: the largest displacement budget, and how far a local waypoint may be
 MAX_RETURN_SPEED = 5.0  # m/s
@@ -81,14 +92,23 @@ class FieldRange:
 UNUSED = FieldRange("unused", used=False)
 
 
+def command_name(command: int) -> str:
+    """A plan command's name as plans, logs and messages write it: the dialect's MAV_CMD name without its
+    ``MAV_CMD_`` / ``NAV_`` prefix (``RETURN_TO_LINK``, ``LOITER_TIME``, ``LEASE_BOUNDARY``...)."""
+    return mav.enums["MAV_CMD"][command].name.removeprefix("MAV_CMD_").removeprefix("NAV_")
+
+
 @dataclass(frozen=True)
 class Kind:
-    """One item kind: its name and its seven fields (param1..4, x, y, z), and whether x/y are a position."""
+    """One item kind: its MAV_CMD, its seven fields (param1..4, x, y, z), and whether x/y are a position."""
 
     command: int
-    name: str
     fields: tuple[FieldRange, ...]
     position: bool = False
+
+    @property
+    def name(self) -> str:
+        return command_name(self.command)
 
     def field(self, index: int, frame: int) -> FieldRange:
         """Field 1..7; a position's x/y range depends on the frame (degrees or metres)."""
@@ -100,23 +120,24 @@ class Kind:
 
 
 KINDS: dict[int, Kind] = {k.command: k for k in (
-    Kind(NAV_RETURN_TO_LINK, "RETURN_TO_LINK", (
+    Kind(NAV_RETURN_TO_LINK, (
         FieldRange("max displacement", 0.0, MAX_DISPLACEMENT, nan=0.0),  # 0 = RTL_MAX_DISP
         FieldRange("speed", 0.0, MAX_RETURN_SPEED, nan=0.0),  # 0 = RTL_SPEED
         FieldRange("target", 0, 2, integer=True, special=(-1.0,), nan=-1.0),  # RTL_TARGET; -1 = the parameter
         FieldRange("on regain", 0, 1, integer=True, special=(-1.0,), nan=-1.0),  # -1 = RTL_REGAIN_ACT
         FieldRange("heading", -360.0, 360.0, nan=0.0),  # degrees, for target HEADING
         UNUSED, UNUSED)),
-    Kind(LEASE_BOUNDARY, "LEASE_BOUNDARY", (UNUSED,) * 7),
-    Kind(NAV_LOITER_TIME, "LOITER_TIME", (
+    Kind(LEASE_BOUNDARY, (UNUSED,) * 7),
+    Kind(NAV_LOITER_TIME, (
         FieldRange("time", 0.0, MAX_LOITER),  # s; NaN refused: how long to hold is the point of the item
         UNUSED, UNUSED, UNUSED, UNUSED, UNUSED, UNUSED)),  # heading, radius, xtrack, position: a rover holds in place
-    Kind(NAV_RETURN_TO_LAUNCH, "RETURN_TO_LAUNCH", (UNUSED,) * 7),
-    Kind(NAV_WAYPOINT, "WAYPOINT", (
+    Kind(NAV_RETURN_TO_LAUNCH, (UNUSED,) * 7),
+    Kind(NAV_WAYPOINT, (
         FieldRange("hold", 0.0, MAX_LOITER, nan=0.0), FieldRange("acceptance radius", 0.0, 1000.0, nan=0.0),
         UNUSED, UNUSED, UNUSED, UNUSED, UNUSED), position=True),
 )}
-NAMES = {k.command: k.name for k in KINDS.values()}
+NAMES = {k.command: k.name for k in KINDS.values()}  # the plan commands by MAV_CMD number: the one home of their names
+COMMANDS = {name: command for command, name in NAMES.items()}  # ... and by name
 PARAM_NAMES = ("param1", "param2", "param3", "param4", "x", "y", "z")
 
 

@@ -16,7 +16,7 @@ Each random stream belongs to one subsystem, named, and is derived from the run'
 (``subsystem_rng``): the packet fates of one direction of one station's link (keyed by send time and rank, so
 they do not depend on how many packets went before), the shadowing field, the sensors, the robot. A draw in one
 never shifts another, so two trials that differ only in what the vehicle does after a link loss see the same
-radio, sensors and physics until then (DESIGN §9, paired trials).
+radio, sensors and physics until then (docs/architecture.md §9, paired trials).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""MAVLink 2 message signing (DESIGN §4.1), pure and shared by the vehicle and the ground station.
+"""MAVLink 2 message signing (docs/architecture.md §4.1), pure and shared by the vehicle and the ground station.
 
 Without signing, one UDP packet is enough to learn the epoch and the owner from the broadcast telemetry and to act
 as the owner: force a return, change a parameter, take the root, or keep the link-loss trigger from ever firing
@@ -14,7 +14,7 @@ a "replay" and lock the owner out. Here a frame whose signature does not verify 
 Outgoing frames are signed by pymavlink itself (``MAVLink.signing``): ``enable`` and ``advance`` only set it up.
 
 ``Streams.verify`` is a pure function of (streams, key, frame bytes, own timestamp) returning new streams and a
-``Verdict``: the caller decides what a verdict means (the vehicle's gate, the station's filter).
+``SigningVerdict``: the caller decides what a verdict means (the vehicle's gate, the station's filter).
 """
 
 from __future__ import annotations
@@ -38,8 +38,8 @@ KEY_BYTES = 32
 SIM_ORIGIN = (1767225600 - EPOCH_UNIX) * UNITS_PER_SECOND
 
 
-class Verdict(Enum):
-    """What a received frame is, as far as signing goes."""
+class SigningVerdict(Enum):
+    """What a received frame is, as far as signing goes (the lease rules' own ``Verdict`` is another thing)."""
 
     ACCEPT = "accepted"  # signed with the key, newer than its stream's last frame
     UNSIGNED = "unsigned"  # no signature block (or MAVLink 1)
@@ -47,6 +47,9 @@ class Verdict(Enum):
     REPLAY = "replayed"  # correctly signed but not newer than the last accepted frame of its stream
     TOO_OLD = "too old"  # correctly signed, a stream never seen, more than 60 s behind our clock
 
+
+# the name it had before the lease rules' Verdict claimed it; kept while vehicle/mavlink.py still imports it
+Verdict = SigningVerdict
 
 StreamId = tuple[int, int, int]  # (sysid, compid, link id) of the sender
 
@@ -173,20 +176,20 @@ class Streams:
 
     last: dict[StreamId, int] = field(default_factory=dict)
 
-    def verify(self, key: Key, frame: bytes, now: int) -> tuple[Streams, Verdict]:
+    def verify(self, key: Key, frame: bytes, now: int) -> tuple[Streams, SigningVerdict]:
         """Judge one whole frame against ``key`` with ``now`` our own signing timestamp."""
         block = signature_block(frame)
         if block is None:
-            return self, Verdict.UNSIGNED
+            return self, SigningVerdict.UNSIGNED
         if not hmac.compare_digest(signature(key, bytes(frame[:-6])), block.signature):
-            return self, Verdict.BAD_SIGNATURE  # never moves a timestamp: a forgery cannot lock a stream
+            return self, SigningVerdict.BAD_SIGNATURE  # never moves a timestamp: a forgery cannot lock a stream
         previous = self.last.get(block.stream)
         if previous is not None:
             if block.timestamp <= previous:
-                return self, Verdict.REPLAY
+                return self, SigningVerdict.REPLAY
         elif block.timestamp + NEW_STREAM_WINDOW < now:
-            return self, Verdict.TOO_OLD
-        return Streams({**self.last, block.stream: block.timestamp}), Verdict.ACCEPT
+            return self, SigningVerdict.TOO_OLD
+        return Streams({**self.last, block.stream: block.timestamp}), SigningVerdict.ACCEPT
 
 
 def timestamp_of(frame: bytes) -> int | None:

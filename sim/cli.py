@@ -73,9 +73,32 @@ def _parm_file(path: str | None) -> Path | None:
     return p
 
 
+def _policy_for(args: argparse.Namespace, kind: str) -> str:
+    """--policy, or the default for the vehicle; a policy the vehicle cannot fly exits 2."""
+    from sim.policies import DEFAULT_FIRMWARE_POLICY, DEFAULT_POLICY, FIRMWARE_VEHICLE, flies
+
+    policy = args.policy or (DEFAULT_FIRMWARE_POLICY if kind == FIRMWARE_VEHICLE else DEFAULT_POLICY)
+    if not flies(policy, kind):
+        if kind == FIRMWARE_VEHICLE:
+            raise _fail(f"vehicle {kind} flies the ArduPilot firmware's own failsafes: --policy ardupilot-hold, "
+                        f"ardupilot-rtl or ardupilot-smartrtl (got {policy})")
+        raise _fail(f"policy {policy} is the ArduPilot firmware's own failsafe: use --vehicle {FIRMWARE_VEHICLE}")
+    return policy
+
+
+def _firmware(option: str | None) -> Path:
+    """The firmware binary (--firmware, RETURNLINK_ARDUROVER, or ardurover on PATH); none: exit 2 saying so."""
+    from sim.firmware.locate import FirmwareNotFound, find_firmware
+
+    try:
+        return find_firmware(option)
+    except FirmwareNotFound as e:
+        raise _fail(str(e)) from None
+
+
 def _cmd_sim_run(args: argparse.Namespace) -> int:
-    from sim import metrics
-    from sim.runner import Run, write_metrics, write_tlog
+    from sim import outputs
+    from sim.policies import FIRMWARE_VEHICLE
 
     if args.replay:
         return _cmd_sim_replay(args)
@@ -83,23 +106,39 @@ def _cmd_sim_run(args: argparse.Namespace) -> int:
         return _usage_error("sim run needs a SCENARIO (or --replay DIR TRIAL)")
     sc = _run_overrides(_scenario(args.scenario), args)
     kind = args.vehicle or sc.vehicle
+    policy = _policy_for(args, kind)
+    firmware = _firmware(args.firmware) if kind == FIRMWARE_VEHICLE else None
     seed = sc.seed if args.seed is None else args.seed
     out = Path(args.out) if args.out else Path("out") / f"{sc.name}-{kind}-{seed}"
     _writable_dir(out)
-    print(f"returnlink: running {sc.name} with the {kind} (seed {seed}, policy {args.policy}), "
+    print(f"returnlink: running {sc.name} with the {kind} (seed {seed}, policy {policy}), "
           f"{sc.duration:g} simulated s", file=sys.stderr)
-    run = Run(sc, kind, seed, progress=not args.quiet, policy=args.policy).run()
-    m = run.metrics = metrics.compute(run)
-    try:
-        paths = [write_metrics(m, out / "metrics.json"), write_tlog(run, out / "run.tlog")]
-        if not args.no_plots:
-            from sim import report  # matplotlib: about 0.4 CPU-s to import, paid only when plots are drawn
+    if firmware is None:
+        from sim.runner import Run
 
-            paths += [report.trajectory(run, out / "trajectory.png"), report.timeline(run, out / "timeline.png")]
+        run = Run(sc, kind, seed, progress=not args.quiet, policy=policy).run()
+    else:
+        from sim.firmware.process import FirmwareError, stop_on_terminate
+        from sim.firmware.run import FirmwareRun
+
+        print(f"returnlink: firmware {firmware}", file=sys.stderr)
+        try:
+            with stop_on_terminate():
+                run = FirmwareRun(sc, seed, policy, firmware, progress=not args.quiet,
+                                  log_path=out / "firmware.log").run()
+        except FirmwareError as e:
+            print(f"returnlink: the firmware failed: {e}", file=sys.stderr)
+            return 1
+        except KeyboardInterrupt:
+            print("returnlink: interrupted; the firmware was stopped", file=sys.stderr)
+            return 130
+    m = run.metrics = outputs.compute(run)
+    try:
+        paths = outputs.write(run, out, plots=not args.no_plots)
     except OSError as e:  # the directory was writable a moment ago: a full disk, a removed directory
-        print(metrics.summary(run, m))
+        print(outputs.summary(run, m))
         raise _fail(f"cannot write the results to {out}: {e}") from None
-    print(metrics.summary(run, m))
+    print(outputs.summary(run, m))
     print("  wrote " + ", ".join(str(p) for p in paths))
     return 0 if m["passed"] else 1
 
@@ -166,12 +205,13 @@ def _run_overrides(sc, args: argparse.Namespace):
 def _cmd_sim_replay(args: argparse.Namespace) -> int:
     """Run a stored campaign trial again from its parquet row's inputs; its metrics must come out the same."""
     import json
+    from dataclasses import replace
     from pathlib import Path
 
-    from sim import metrics, report
+    from sim import outputs
     from sim.campaign.store import JSON_METRICS, TRIALS_FILE, read_rows
     from sim.campaign.trial import same_metrics, simulate, trial_from_row
-    from sim.runner import write_metrics, write_tlog
+    from sim.policies import FIRMWARE_VEHICLE
     from vehicle.storage import StoredFileError
 
     if args.scenario or args.param or args.plan is not None or args.seed is not None or args.vehicle:
@@ -190,6 +230,8 @@ def _cmd_sim_replay(args: argparse.Namespace) -> int:
         return _usage_error(f"{path}: {'no' if not found else 'more than one'} trial {wanted!r}")
     row = found[0]
     trial = trial_from_row(row)
+    if trial.vehicle == FIRMWARE_VEHICLE:
+        trial = replace(trial, firmware=str(_firmware(args.firmware)))
     out = Path(args.out) if args.out else Path(directory) / "replay" / row["trial_id"]
     print(f"returnlink: replaying trial {row['trial_id']}: {trial.scenario} with the {trial.vehicle} (seed "
           f"{trial.seed}, policy {trial.policy}, params {row['params']})", file=sys.stderr)
@@ -199,10 +241,8 @@ def _cmd_sim_replay(args: argparse.Namespace) -> int:
         print(f"returnlink: the trial raised {type(e).__name__}: {e} (stored: {row.get('error')})", file=sys.stderr)
         return 1
     m = run.metrics
-    paths = [write_metrics(m, out / "metrics.json"), write_tlog(run, out / "run.tlog")]
-    if not args.no_plots:
-        paths += [report.trajectory(run, out / "trajectory.png"), report.timeline(run, out / "timeline.png")]
-    print(metrics.summary(run, m))
+    paths = outputs.write(run, out, plots=not args.no_plots)
+    print(outputs.summary(run, m))
     print("  wrote " + ", ".join(str(p) for p in paths))
     if row["status"] == "error":
         print(f"returnlink: the stored row is an error ({row.get('error')}); nothing to compare", file=sys.stderr)
@@ -210,11 +250,24 @@ def _cmd_sim_replay(args: argparse.Namespace) -> int:
     stored = {k: (json.loads(v) if isinstance(v, str) and k in JSON_METRICS else v)
               for k, v in row.items() if k in m}
     fresh = json.loads(json.dumps({k: m[k] for k in stored}))
-    differ = [k for k in same_metrics(stored, fresh) if k not in ("scenario", "vehicle", "seed", "policy")]
+    if trial.vehicle == FIRMWARE_VEHICLE:
+        from sim.firmware.metrics import differing
+
+        differ = [k for k in differing(stored, fresh) if k not in ("scenario", "vehicle", "seed", "policy")]
+        same = "metrics match the stored trial within the firmware's repeatability (sim.firmware.metrics.TOLERANCE)"
+    else:
+        differ = [k for k in same_metrics(stored, fresh) if k not in ("scenario", "vehicle", "seed", "policy")]
+        same = "metrics identical to the stored trial (real_time_factor aside)"
+    if differ and trial.vehicle == FIRMWARE_VEHICLE:
+        print(f"returnlink: the firmware did not repeat the stored trial exactly: {', '.join(differ)} differ beyond "
+              "its repeatability (see sim/firmware/metrics.py: ArduPilot SITL's own threads make a firmware run "
+              "repeatable only within a tick or so, and the radio can turn that tick into another outcome)",
+              file=sys.stderr)
+        return 0 if m["passed"] else 1
     if differ:
         print(f"returnlink: error: replay differs from the stored trial in {', '.join(differ)}", file=sys.stderr)
         return 1
-    print("  metrics identical to the stored trial (real_time_factor aside)")
+    print(f"  {same}")
     return 0 if m["passed"] else 1
 
 
@@ -233,6 +286,15 @@ def _cmd_sim_sweep(args: argparse.Namespace) -> int:
         spec = load_spec(args.spec)
     except SpecError as e:
         return _usage_error(str(e))
+    if any(t.vehicle == "ardurover" for t in spec.trials):
+        import os
+        from dataclasses import replace
+
+        from sim.firmware.locate import ENV
+
+        firmware = str(_firmware(args.firmware))
+        os.environ[ENV] = firmware  # for workers that run a stored trial again (a resumed or retried one)
+        spec = replace(spec, trials=tuple(replace(t, firmware=firmware) for t in spec.trials))
     out = Path(args.out) if args.out else Path("out") / f"sweep-{Path(args.spec).stem}"
     from sim.campaign import sweep
     from sim.campaign.executors import RayExecutor, SerialExecutor
@@ -263,7 +325,14 @@ def _add_sweep_parser(sim) -> None:
     sw.add_argument("--workers", type=int, help="trials at a time (default: every CPU of this machine or cluster)")
     sw.add_argument("--address", help="join a Ray cluster: auto or HOST:PORT (default: a local Ray, started here)")
     sw.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_firmware_option(sw)
     sw.set_defaults(func=_cmd_sim_sweep)
+
+
+def _add_firmware_option(parser) -> None:
+    parser.add_argument("--firmware", metavar="PATH",
+                        help="ArduPilot Rover SITL binary for vehicle ardurover (default: $RETURNLINK_ARDUROVER, "
+                             "else ardurover on PATH)")
 
 
 def _add_run_campaign_options(run) -> None:
@@ -276,11 +345,54 @@ def _add_run_campaign_options(run) -> None:
     run.add_argument("--no-plots", action="store_true", help="skip trajectory.png and timeline.png")
 
 
+def _cmd_sim_serve_firmware(args: argparse.Namespace, sc) -> int:
+    """`sim serve --vehicle ardurover`: the firmware, paced by itself, behind the radio proxy."""
+    from sim.firmware.process import FirmwareError, stop_on_terminate
+    from sim.firmware.report import trajectory
+    from sim.firmware.serve import FirmwareServer
+
+    policy = _policy_for(args, "ardurover")
+    firmware = _firmware(args.firmware)
+    for flag in ("params", "key", "state"):
+        if getattr(args, flag):
+            raise _fail(f"--{flag} configures returnlink's own vehicle; the ArduPilot firmware keeps its parameters "
+                        "and signing in itself (set them over MAVLink)")
+    out = Path(args.out) if args.out else Path("out") / f"serve-{sc.name}-ardurover"
+    _writable_dir(out)
+    peers = tuple(args.peer) if args.peer else (("127.0.0.1", 14550), ("127.0.0.1", 14540))
+    try:
+        server = FirmwareServer(sc, args.seed, policy, firmware, args.port, peers, args.perfect_link, args.speedup,
+                                args.duration, log_path=out / "firmware.log")
+    except OSError as e:
+        print(f"returnlink: error: cannot bind 127.0.0.1:{args.port}: {e}", file=sys.stderr)
+        return 2
+    host, port = server.address
+    print(f"returnlink: {sc.name} with the ArduPilot firmware ({firmware}, policy {policy}) on udp {host}:{port}, "
+          "sending to " + ", ".join(f"{h}:{p}" for h, p in peers)
+          + ("" if args.perfect_link else ", through the radio model"), file=sys.stderr, flush=True)
+    try:
+        with stop_on_terminate():
+            server.run()
+    except FirmwareError as e:
+        print(f"returnlink: the firmware failed: {e}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("returnlink: stopped; the firmware was stopped", file=sys.stderr)
+    if server.rows:
+        print(f"returnlink: wrote {trajectory(server, out / 'trajectory.png')}", file=sys.stderr)
+    return 0
+
+
 def _cmd_sim_serve(args: argparse.Namespace) -> int:
+    from sim.policies import FIRMWARE_VEHICLE
     from sim.serve import Server
     from vehicle.storage import StoredFileError
 
     sc = _scenario(args.scenario)
+    if args.vehicle == FIRMWARE_VEHICLE:
+        return _cmd_sim_serve_firmware(args, sc)
+    if args.policy or args.firmware:
+        raise _fail("--policy and --firmware go with --vehicle ardurover (the native vehicle flies its own plan)")
     params = _parm_file(args.params)
     if args.out:
         _writable_dir(Path(args.out))  # the plot is written on exit: know now that it can be
@@ -354,7 +466,7 @@ def _cmd_keys(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from sim.policies import DEFAULT_POLICY, POLICY_NAMES
+    from sim.policies import DEFAULT_POLICY, FIRMWARE_POLICIES, POLICY_NAMES
 
     p = argparse.ArgumentParser(
         prog="returnlink", description="Lease-based automated return to link for MAVLink robots.")
@@ -368,18 +480,26 @@ def build_parser() -> argparse.ArgumentParser:
     run = sim.add_parser("run", help="run a scenario in lockstep, as fast as possible")
     run.add_argument("scenario", nargs="?", help="a built-in scenario name or a .toml file")
     run.add_argument("--seed", type=types.SEED, help="random seed (default: the scenario's)")
-    run.add_argument("--vehicle", choices=["rover", "legged"], help="robot model (default: the scenario's)")
+    run.add_argument("--vehicle", choices=["rover", "legged", "ardurover"],
+                     help="robot model (default: the scenario's); ardurover: the scenario's rover driven by the real "
+                          "ArduPilot firmware")
     run.add_argument("--out", help="output directory (default: out/SCENARIO-VEHICLE-SEED)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
-    run.add_argument("--policy", choices=POLICY_NAMES, default=DEFAULT_POLICY,
-                     help="what the vehicle does when its link is lost: the scenario's plan (returnlink) or a "
-                          "baseline (DESIGN §9)")
+    run.add_argument("--policy", choices=POLICY_NAMES,
+                     help=f"what the vehicle does when its link is lost: the scenario's plan ({DEFAULT_POLICY}, the "
+                          "default), a baseline (docs/architecture.md §9), or with --vehicle ardurover the "
+                          "firmware's own failsafe (default ardupilot-smartrtl)")
+    _add_firmware_option(run)
     _add_run_campaign_options(run)
     run.set_defaults(func=_cmd_sim_run)
     _add_sweep_parser(sim)
     serve = sim.add_parser("serve", help="run a scenario in real time over UDP for MAVSDK, MAVProxy, QGC")
     serve.add_argument("scenario", help="a built-in scenario name or a .toml file")
-    serve.add_argument("--vehicle", choices=["rover", "legged"], help="robot model (default: the scenario's)")
+    serve.add_argument("--vehicle", choices=["rover", "legged", "ardurover"],
+                       help="robot model (default: the scenario's); ardurover: the real ArduPilot firmware")
+    serve.add_argument("--policy", choices=FIRMWARE_POLICIES,
+                       help="with --vehicle ardurover: its GCS failsafe (default ardupilot-smartrtl)")
+    _add_firmware_option(serve)
     serve.add_argument("--seed", type=types.SEED)
     serve.add_argument("--speedup", type=types.SPEEDUP, default=1.0, help="run K times faster than real time")
     serve.add_argument("--port", type=types.LISTEN_PORT, default=14580, help="UDP port the vehicle listens on")
@@ -405,6 +525,9 @@ def build_parser() -> argparse.ArgumentParser:
     from gcs import cli as gcs_cli
 
     gcs_cli.add_parser(sub)
+    from vehicle.companion import cli as companion_cli
+
+    companion_cli.add_parser(sub)
     return p
 
 

@@ -1,4 +1,4 @@
-"""The figures of one run (DESIGN §7: the keys of metrics.json are a contract) and the scenario's verdict.
+"""The figures of one run (docs/architecture.md §7: the keys of metrics.json are a contract) and the scenario's verdict.
 
 Positions are compared in one frame, the true one (the simulator's ground truth): the loss and rest positions,
 distances and displacements, and the return target, which the vehicle chose in its estimate frame, is taken as
@@ -19,7 +19,7 @@ KEYS = ("scenario", "vehicle", "seed", "sim_duration_s", "link_lost_s", "return_
         "link_regained_s", "distance_back_m", "max_displacement_m", "final_target_error_m", "collisions",
         "stale_commands_executed", "commands_rejected", "estimator_rmse_m", "trail_points",
         "trail_max_deviation_m", "real_time_factor", "lease_events", "passed", "failures",
-        # added compatibly (DESIGN §7, §9)
+        # added compatibly (docs/architecture.md §7, §9)
         "policy", "loss_position", "rest_position", "rest_link_quality", "link_cycles", "regained_by",
         "collisions_during_return", "return_speed_mps", "blocks", "frames")
 FRAMES = {"loss_position": "true", "rest_position": "true", "distance_back_m": "true", "max_displacement_m": "true",
@@ -54,7 +54,6 @@ def path_deviation(path: np.ndarray, poly: np.ndarray) -> float:
 def compute(run: Run) -> dict:
     v, sc, tr = run.vehicle, run.scenario, run.trace
     events = run.lease_events
-    timeout = v.params["LNK_TIMEOUT"]
     first_return = next((e.t for e in v.event_log if e.current is not None and _holder_is_service(e)), None)
     lost = run.losses[0] if run.losses else None
     reaction = None
@@ -64,10 +63,13 @@ def compute(run: Run) -> dict:
     if acted is not None:
         first_return = acted[0] if acted else None
     if comms_return is not None:
-        heard = next((h for t, h in run.losses if abs(t - comms_return.t) < 1e-9), None)
+        # from the moment the trigger's condition became true (silence: owner last heard + LNK_TIMEOUT; quality:
+        # the delivery estimate falling below LNK_MIN_Q), so the reaction to a quality loss is never negative
+        cond = next((c for (t, _), c in zip(run.losses, run.loss_conditions, strict=True)
+                     if abs(t - comms_return.t) < 1e-9), None)
         start = comms_return.t if acted is None else next((a for a in acted if a >= comms_return.t - 1e-9), None)
-        if heard is not None and start is not None:
-            reaction = start - heard - timeout
+        if cond is not None and start is not None:
+            reaction = start - cond + 0.0
     # the link counts as back when the vehicle says so: LINK_REGAINED ending a block, or after a block completed
     regained = run.link_backs[0][0] if run.link_backs else None
     blocks = run.blocks
@@ -218,13 +220,11 @@ def verdict(run: Run, m: dict) -> list[str]:
 
 
 def _reaction(latency: float | None) -> str:
-    """The reaction as a reader should take it: after a silence it is measured from LNK_TIMEOUT; a loss called by
-    the quality trigger (LNK_MIN_Q) comes while lucky packets still arrive, before any silence timed out."""
+    """The reaction as a reader should take it: from the moment the trigger's condition became true (LNK_TIMEOUT
+    of silence, or the owner's delivery falling below LNK_MIN_Q)."""
     if latency is None:
         return "reaction -"
-    if latency < -1e-6:
-        return f"quality trigger: delivery below LNK_MIN_Q, {-latency:.3f} s before a silence would have timed out"
-    return f"reaction {latency:.3f} s after LNK_TIMEOUT"
+    return f"reaction {latency:.3f} s after the trigger's condition (LNK_TIMEOUT of silence or LNK_MIN_Q)"
 
 
 def summary(run: Run, m: dict) -> str:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from gcs.station import GroundStation, LeaseStatus, Pending, Transfer, Vehicle, mav
+from gcs.station import GroundStation, LeaseStatus, Pending, Transfer, VehicleView, mav
 from link.mission import Item
 
 STALE_TELEMETRY = 1.0  # s: an operator stops pushing the stick when the picture freezes
@@ -97,7 +97,7 @@ class Operator:
         else:
             self._drive(leg)
 
-    def _set_up(self, t: float, gs: GroundStation, v: Vehicle, st: LeaseStatus | None) -> None:
+    def _set_up(self, t: float, gs: GroundStation, v: VehicleView, st: LeaseStatus | None) -> None:
         """Connect, take control, upload the plan, arm: one phase a tick until it drives."""
         if self.phase == "connect":
             if v.last_heard is not None and st is not None:

@@ -7,8 +7,8 @@ real-time-factor figure, so the same scenario and seed give the same metrics.
 
 Every random draw comes from a stream of its own subsystem, derived from the seed by name (the robot, the
 sensors, the shadowing field, each direction of each station's radio link): a run flown under another link-loss
-policy (``policy=``, DESIGN §9) sees the same world, noise and packet fates, and so the same trace, until the
-first COMMS_LOST, where only the policy differs.
+policy (``policy=``, docs/architecture.md §9) sees the same world, noise and packet fates, and so the same trace, until
+the first COMMS_LOST, where only the policy differs.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ from link.proxy import RadioReport
 from link.radio import LinkState, Radio
 from link.transports import LockstepBus
 from sim.driver import simulated_vehicle
+from sim.jams import Jams
 from sim.operator import Operator
 from sim.policies import DEFAULT_POLICY, check_policy, make_policy
 from sim.policies.base import Baseline
@@ -46,10 +47,6 @@ _TLOG_STAMP = struct.Struct(">Q").pack
 # every tick gave (for DT = 1/50 s the sum strays from k / 50 by far less than 1e-9 for days of ticks), at the
 # cost of a division instead of a ``round``
 TICK_RATE = round(1 / DT)
-# the enum member ``_record`` compares with every tick, looked up once (an Enum class attribute costs a lookup
-# through its metaclass each time)
-_RETURN_SERVICE = Holder.RETURN_SERVICE
-
 
 @dataclass
 class StationSim:
@@ -168,7 +165,7 @@ class Run:
         op.operator = Operator(op.gs, sc.route, sc.resume_route, from_plan_items(sc.plan), sc.teleop,
                                    attempts=sc.attempts)
         self.events = sorted(sc.events, key=lambda e: e.t)
-        self.jams: list[tuple[float, float, str]] = []  # (from, until, station or "")
+        self.jams = Jams()
         self.t = 0.0
         self.ticks = 0
         self.duration = sc.duration if duration is None else duration
@@ -185,6 +182,9 @@ class Run:
         self.audit_stale = 0  # actuations the runner's own audit found outside the announced current lease
         self.announced: tuple[int, int | None] | None = None  # (epoch, current index) from LEASE_EVENTs
         self.losses: list[tuple[float, float | None]] = []  # (COMMS_LOST time, owner last heard before it)
+        # when each loss's trigger condition became true: LNK_TIMEOUT after the owner was last heard (silence), or
+        # the tick the owner's delivery estimate fell below LNK_MIN_Q (quality), whichever came first
+        self.loss_conditions: list[float | None] = []
 
     # ----- the loop ------------------------------------------------------------------------------------------
     def run(self) -> Run:
@@ -222,32 +222,53 @@ class Run:
         return self
 
     def step(self) -> None:
-        """One tick. Work nothing waits for is skipped (an empty queue, a dead station, a timed event not due
-        yet), never reordered: the radio draws each packet's fate in the same order as ever. A queue is received
-        from only when its head is due (most ticks nothing is: a call saved)."""
+        """One tick, in the order of the module's docstring. Work nothing waits for is skipped (an empty queue, a
+        dead station, a timed event not due yet), never reordered: the radio draws each packet's fate in the same
+        order as ever."""
         self.ticks += 1
         self.t = t = self.ticks / TICK_RATE
-        v, ep, bus, stations = self.vehicle, self.endpoint, self.bus, self._station_list
+        self._deliver(t)
+        if self.events and self.events[0].t <= t + 1e-9:
+            self._events(t)
+        for st in self._station_list:
+            if st.alive and st.operator is not None:
+                st.operator.step(t)
+        self._tick_vehicle(t)
+        self.driver.advance(DT)
+        pos = self.robot.pose[:2]
+        radio = self.radio
+        for st in self._station_list:
+            st.state = radio.link(st.antenna, st.power_dbm, pos) if st.alive else None
+        self._downlink(self.endpoint.tick(t), t)
+        self._uplink(t)
+        if t >= self.next_radio_status:
+            self.next_radio_status = t + 1.0
+            self._radio_status(t)
+        self._record(t, pos)
+
+    def _deliver(self, t: float) -> None:
+        """What the radio delivers by ``t``: to the vehicle's endpoint, and to every station (a dead one drops it).
+        A queue is received from only when its head is due (most ticks nothing is: a call saved)."""
         inbox = self._inbox
         if inbox and inbox[0][0] <= t:
-            for data, _src in bus.receive("vehicle", t):
-                ep.receive(data, t)
-        for st in stations:
+            for data, _src in self.bus.receive("vehicle", t):
+                self.endpoint.receive(data, t)
+        for st in self._station_list:
             inbox = st.inbox
             if not inbox or inbox[0][0] > t:
                 continue
-            for data, _src in bus.receive(st.name, t):
+            for data, _src in self.bus.receive(st.name, t):
                 if st.alive:
                     st.gs.feed(data, t)
                     if st.operator is not None:
                         self._log_frame(data, t)
-        if self.events and self.events[0].t <= t + 1e-9:
-            self._events(t)
-        for st in stations:
-            if st.alive and st.operator is not None:
-                st.operator.step(t)
+
+    def _tick_vehicle(self, t: float) -> None:
+        """The vehicle loop's tick, and what the metrics need of it: when the owner's link came back, and each
+        new lease event (the lease the runner's own audit expects, the losses and the regains)."""
+        v = self.vehicle
         link = v.book.link
-        n_events, heard, was_lost = len(v.event_log), link.last_heard, link.lost
+        n_events, heard, was_lost, low = len(v.event_log), link.last_heard, link.lost, link.low
         v.tick(t)
         if was_lost:
             link = v.book.link
@@ -258,24 +279,31 @@ class Run:
                 self.announced = (e.epoch, e.current)
                 if e.reason.name == "COMMS_LOST":
                     self.losses.append((e.t, heard))
+                    silence = None if heard is None else heard + v.params["LNK_TIMEOUT"]
+                    self.loss_conditions.append(min(silence, t) if low and silence is not None else silence)
                 elif e.reason.name == "LINK_REGAINED":
                     self.regains.append((e.t, v.book.link.contact_since))
-        self.driver.advance(DT)
-        pos = self.robot.pose[:2]
-        radio = self.radio
-        for st in stations:
-            st.state = radio.link(st.antenna, st.power_dbm, pos) if st.alive else None
-        frames = ep.tick(t)
-        if frames:
-            # a station out of range or jammed hears nothing: its fates are not drawn, as before
-            live = [st for st in stations if st.state is not None and not (self.jams and self._jammed(st.name, t))]
-            for data in frames:
-                for st in live:
-                    lane, stream = st.down
-                    at = radio.arrival(st.state, t, lane, stream)
-                    if at is not None:
-                        bus.send("vehicle", st.name, data, at)
-        for st in stations:
+
+    def _downlink(self, frames: list[bytes], t: float) -> None:
+        """The vehicle's frames through the radio to every station in range; a station out of range or jammed
+        hears nothing, and its fates are not drawn."""
+        if not frames:
+            return
+        radio, bus = self.radio, self.bus
+        live = [st for st in self._station_list
+                if st.state is not None and not (self.jams and self._jammed(st.name, t))]
+        for data in frames:
+            for st in live:
+                lane, stream = st.down
+                at = radio.arrival(st.state, t, lane, stream)
+                if at is not None:
+                    bus.send("vehicle", st.name, data, at)
+
+    def _uplink(self, t: float) -> None:
+        """Every live station's tick: what it sends goes to the .tlog (the operator's) and through the radio to the
+        vehicle, unless out of range or jammed."""
+        radio, bus = self.radio, self.bus
+        for st in self._station_list:
             if not st.alive:
                 continue
             sent = st.gs.tick(t)
@@ -291,15 +319,9 @@ class Run:
                 at = radio.arrival(st.state, t, lane, stream)
                 if at is not None:
                     bus.send(st.name, "vehicle", data, at)
-        if t >= self.next_radio_status:
-            self.next_radio_status = t + 1.0
-            self._radio_status(t)
-        self._record(t, pos)
 
     def _jammed(self, station: str, t: float) -> bool:
-        if not self.jams:  # most runs have none: skip the generator on every transmit
-            return False
-        return any(a <= t < b and (not s or s == station) for a, b, s in self.jams)
+        return self.jams.jammed(station, t)
 
     def _radio_status(self, t: float) -> None:
         """The operator's telemetry radio reports both ends' RSSI, as a SiK radio would."""
@@ -320,9 +342,9 @@ class Run:
             name = ev.station or self.scenario.operator_station
             st = self.stations.get(name)
             if ev.action == "jam":
-                self.jams.append((ev.t, ev.t + (ev.duration or math.inf), ev.station))
+                self.jams.jam(ev.t, ev.duration, ev.station)
             elif ev.action == "unjam":
-                self.jams = [(a, min(b, t), s) for a, b, s in self.jams]
+                self.jams.unjam(t)
             elif ev.action == "kill_gcs" and st is not None:
                 st.alive = False
             elif ev.action == "revive_gcs" and st is not None:
@@ -352,7 +374,7 @@ class Run:
             holder, index, returning = 0, -1, False
         else:
             h = cur.holder
-            holder, index, returning = int(h), cur.index, h is _RETURN_SERVICE
+            holder, index, returning = int(h), cur.index, h is Holder.RETURN_SERVICE
         op = self._operator
         state = op.state
         if state is None:

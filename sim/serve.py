@@ -32,8 +32,8 @@ class Server:
                  epochs_file: Path | None = None) -> None:
         """``keystore`` (``KeyStore.open(FILE)``): the vehicle signs with that key and obeys only frames signed with
         it; its signing clock is the wall clock, as ground stations' are. ``epochs_file``: where the epochs this
-        vehicle issues are kept across restarts (DESIGN §3.1); the boot epoch is drawn from the OS random source
-        either way, never from ``seed``."""
+        vehicle issues are kept across restarts (docs/architecture.md §3.1); the boot epoch is drawn from the OS random
+        source either way, never from ``seed``."""
         sc = self.scenario = scenario
         self.kind = vehicle or sc.vehicle
         self.seed = sc.seed if seed is None else seed
@@ -59,8 +59,8 @@ class Server:
         return self.proxy.from_ground(t)
 
     def _send(self, frame: bytes, t: float) -> None:
-        """Into the radio, and out at once if the radio says it is due by now (a perfect link, DESIGN §8: a
-        COMMAND_ACK leaves in the tick its command was received). Flushing only at the next tick's start held every
+        """Into the radio, and out at once if the radio says it is due by now (a perfect link, docs/architecture.md §8:
+        a COMMAND_ACK leaves in the tick its command was received). Flushing only at the next tick's start held every
         reply back a whole tick (20 ms at 50 Hz) on top of the radio's own latency."""
         self.proxy.to_ground(frame, t)
         self.proxy.flush(t)

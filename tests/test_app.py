@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from sim.driver import SimDriver
@@ -12,7 +10,6 @@ from vehicle.app import DT, Vehicle, run
 from vehicle.estimator import Pose
 from vehicle.mavlink import Endpoint, mav
 from vehicle.params import load_defaults
-from vehicle.trail import Crumb
 
 
 def test_run_paces_ticks_by_the_injected_clock_and_moves_frames():
@@ -84,9 +81,9 @@ def test_run_answers_a_command_that_arrives_between_ticks_before_the_next_tick()
     assert abs(vehicle.t - 1.0) < 1e-9 and abs(now[0] - 101.0) < 1e-9  # and the pacing is unchanged
 
 
-def test_the_crumbs_and_poses_of_a_tick_are_whole_values():
-    """The tick makes its crumb and its pose with ``_make`` (every field in order): each must be the
-    same value as the named tuple's own constructor gives, every field present."""
+def test_the_pose_of_a_tick_is_a_whole_value():
+    """The estimator makes its pose with the named tuple's ``_make`` (every field in order): it must be the same
+    value as the named tuple's own constructor gives, every field present."""
     sc = load("tunnel")
     driver = SimDriver(sc, "rover", np.random.default_rng(1))
     vehicle = Vehicle(driver, load_defaults(), sc.start, 0.0, seed=1)
@@ -96,6 +93,3 @@ def test_the_crumbs_and_poses_of_a_tick_are_whole_values():
         vehicle.tick(t)
     p = vehicle.estimator.pose
     assert type(p) is Pose and len(p) == len(Pose._fields) and p == Pose(p.x, p.y, p.yaw, p.std, p.t)
-    c = vehicle._crumbs[-1]
-    assert type(c) is Crumb and len(c) == len(Crumb._fields)
-    assert c[:5] == Crumb(p.x, p.y, t, p.std, vehicle.link_is_good)[:5] and math.isnan(c.rssi)

@@ -1,4 +1,5 @@
-"""The attack suite (DESIGN §4.1): with a signing key installed, a station without it can watch but never act.
+"""The attack suite (docs/architecture.md §4.1): with a signing key installed, a station without it can watch but never
+act.
 
 Each test is one attack from a station that has no key, usually spoofing the owner's sysid (255, compid 190, as
 anyone who reads LEASE_STATUS could): it must fail, be counted, and leave the vehicle as it was. The owner signs
@@ -11,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gcs.plans import parse_spec
-from link.signing import Key, Verdict, signature_block, sim_stamp
+from link.signing import Key, SigningVerdict, signature_block, sim_stamp
 from tests.harness import Pair
 from vehicle.app import State
 from vehicle.keystore import KeyStore, read_key, write_key
@@ -42,7 +43,7 @@ def test_spoofing_the_owner_cannot_force_a_return():
     assert pair.vehicle.state() == State.TELEOP and pair.vehicle.book.owner == 255
     assert not any(e.reason.name == "OPERATOR_EXPIRE" for e in pair.vehicle.event_log)
     assert p.result is None  # dropped, not answered: a refusal ACK would land on the owner's own pending command
-    assert pair.endpoint.counters.signing[Verdict.UNSIGNED] >= 2
+    assert pair.endpoint.counters.signing[SigningVerdict.UNSIGNED] >= 2
     assert any(text.startswith("unsigned COMMAND_LONG from 255 refused") for text in refusals(pair))
 
 
@@ -60,7 +61,7 @@ def test_a_replayed_frame_is_refused():
     d = gs.arm(False)
     captured = list(gs.frames)  # the signed DISARM, as a listener on the link would record it
     pair.until(lambda: d.done, 2, "ACK")
-    pair.step(3.1)  # an identical ARM within the 3 s retry window would be answered, not run (DESIGN §3.9)
+    pair.step(3.1)  # an identical ARM within 3 s would be answered, not run (docs/architecture.md §3.9)
     a = gs.arm(True)
     pair.until(lambda: a.done, 2, "ACK")
     pair.step(5.0)  # past the command retry window: only the signature's timestamp tells a replay now
@@ -68,7 +69,7 @@ def test_a_replayed_frame_is_refused():
     pair.raw.extend(captured)
     pair.step(0.1)
     assert pair.vehicle.armed
-    assert pair.endpoint.counters.signing[Verdict.REPLAY] == 1
+    assert pair.endpoint.counters.signing[SigningVerdict.REPLAY] == 1
 
 
 def test_a_forged_far_future_frame_does_not_lock_the_owner_out():
@@ -80,7 +81,7 @@ def test_a_forged_far_future_frame_does_not_lock_the_owner_out():
     forged[-12:-6] = (block.timestamp + 10**11).to_bytes(6, "little")  # the owner's stream, a year ahead
     pair.raw.append(bytes(forged))
     pair.step(0.1)
-    assert pair.endpoint.counters.signing[Verdict.BAD_SIGNATURE] == 1
+    assert pair.endpoint.counters.signing[SigningVerdict.BAD_SIGNATURE] == 1
     r = pair.gs.rtl()
     pair.until(lambda: r.done, 2, "ACK")
     assert r.ok and pair.vehicle.state() in (State.RETURNING, State.HOLDING)
@@ -163,7 +164,7 @@ def test_forged_heartbeats_do_not_keep_the_link_alive():
     timeout = pair.vehicle.params["LNK_TIMEOUT"]
     pair.step(timeout + 0.5)
     assert any(e.reason.name == "COMMS_LOST" for e in pair.vehicle.event_log)
-    assert pair.endpoint.counters.signing[Verdict.UNSIGNED] >= timeout - 1  # the heartbeats, seen and ignored
+    assert pair.endpoint.counters.signing[SigningVerdict.UNSIGNED] >= timeout - 1  # the heartbeats, seen and ignored
 
 
 def test_a_station_with_another_key_cannot_act():
@@ -171,9 +172,9 @@ def test_a_station_with_another_key_cannot_act():
     p = pair.gs.acquire()
     pair.step(2.0)
     assert pair.vehicle.book.owner is None and p.result is None
-    assert pair.endpoint.counters.signing[Verdict.BAD_SIGNATURE] >= 1
+    assert pair.endpoint.counters.signing[SigningVerdict.BAD_SIGNATURE] >= 1
     # and it believes none of the vehicle's frames either: they are not signed with its key
-    assert pair.gs.vehicle.status is None and pair.gs.refused[Verdict.BAD_SIGNATURE] > 0
+    assert pair.gs.vehicle.status is None and pair.gs.refused[SigningVerdict.BAD_SIGNATURE] > 0
 
 
 def test_an_unsigned_station_can_still_watch():
@@ -212,13 +213,48 @@ def test_refusals_are_announced_at_most_every_two_seconds():
     assert pair.vehicle.setpoint is None
 
 
-def test_the_read_only_table_lets_no_state_change_through():
-    """Every READ entry is something the vehicle answers, not something it does."""
-    reads = {k for k, v in ACCESS.items() if v is Access.READ}
-    assert reads == {"HEARTBEAT", "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "MISSION_REQUEST_LIST",
-                     "MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK", mav.MAV_CMD_REQUEST_MESSAGE,
-                     mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, mav.MAV_CMD_GET_HOME_POSITION}
-    assert ACCESS.get(mav.MAV_CMD_SET_MESSAGE_INTERVAL, Access.ACT) is Access.ACT
+# one unsigned frame of each request a station without the key may make, and what the vehicle answers it with
+READ_REQUESTS = {
+    "HEARTBEAT": (lambda gs: gs.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0), None),
+    "PARAM_REQUEST_LIST": (lambda gs: gs.param_request_all(), "PARAM_VALUE"),
+    "PARAM_REQUEST_READ": (lambda gs: gs.param_request("LNK_TIMEOUT"), "PARAM_VALUE"),
+    "MISSION_REQUEST_LIST": (lambda gs: gs.mav.mission_request_list_send(1, 1, 0), "MISSION_COUNT"),
+    "MISSION_REQUEST_INT": (lambda gs: gs.mav.mission_request_int_send(1, 1, 0, 0), "MISSION_ITEM_INT"),
+    "MISSION_REQUEST": (lambda gs: gs.mav.mission_request_send(1, 1, 0, 0), "MISSION_ITEM"),
+    "MISSION_ACK": (lambda gs: gs.mav.mission_ack_send(1, 1, mav.MAV_MISSION_ACCEPTED, 0), None),
+    mav.MAV_CMD_REQUEST_MESSAGE: (
+        lambda gs: gs.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION), "AUTOPILOT_VERSION"),
+    mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: (
+        lambda gs: gs.command(mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, 1), "AUTOPILOT_VERSION"),
+    mav.MAV_CMD_GET_HOME_POSITION: (lambda gs: gs.command(mav.MAV_CMD_GET_HOME_POSITION), "HOME_POSITION"),
+}
+
+
+def _what_a_command_could_change(pair: Pair) -> tuple:
+    v, b = pair.vehicle, pair.vehicle.book
+    return (b.epoch, b.owner, b.leases, b.plan, b.queue, b.takeover_allowed, v.armed, v.holding, v.setpoint,
+            dict(v.params.values), v.plan_items, dict(pair.endpoint.telemetry.intervals))
+
+
+def test_every_request_the_gate_lets_through_unsigned_is_answered_and_changes_nothing():
+    """What the signing gate reads as read-only (ACCESS: READ) an unsigned stranger may ask for: each such
+    request passes the gate (not refused there), is answered to the stranger, and leaves everything a
+    command could change as it was. A message newly let through must be given a request here."""
+    reads = {kind for kind, access in ACCESS.items() if access is Access.READ}
+    assert reads <= set(READ_REQUESTS), reads - set(READ_REQUESTS)
+    for kind in sorted(reads, key=str):
+        pair = Pair(vehicle_key=KEY, keys={255: KEY}, intruders=(245,)).take_control("rtl:30 | loiter:5")
+        stranger = pair.intruders[0]
+        send, answer = READ_REQUESTS[kind]
+        pair.step(0.5)
+        before, refused = _what_a_command_could_change(pair), pair.vehicle.commands_rejected
+        heard: list[str] = []
+        stranger.listeners.append(lambda m, t, heard=heard: heard.append(m.get_type()))
+        send(stranger)
+        pair.step(0.5)
+        assert _what_a_command_could_change(pair) == before, kind
+        assert pair.vehicle.commands_rejected == refused, kind  # through the gate, not refused there
+        assert answer is None or answer in heard, (kind, sorted(set(heard)))
 
 
 # ----- SETUP_SIGNING -------------------------------------------------------------------------------------------
@@ -259,7 +295,7 @@ def test_signed_setup_signing_rotates_and_persists_the_key(tmp_path):
     old_holder.param_set("LNK_TIMEOUT", 9.0)  # the old key no longer acts
     pair.step(0.5)
     assert pair.vehicle.params["LNK_TIMEOUT"] == 3.0
-    assert pair.endpoint.counters.signing[Verdict.BAD_SIGNATURE] >= 1
+    assert pair.endpoint.counters.signing[SigningVerdict.BAD_SIGNATURE] >= 1
 
 
 def test_signing_cannot_be_switched_off_over_the_link():
@@ -284,7 +320,7 @@ def test_a_keyed_station_believes_no_forged_answer():
     forger.command_ack_send(mav.MAV_CMD_NAV_RETURN_TO_LAUNCH, mav.MAV_RESULT_DENIED, 0, 0, 255, 190)
     for frame in Sink.frames:
         pair.gs.feed(frame, pair.t)
-    assert not p.done and pair.gs.refused[Verdict.UNSIGNED] == 1
+    assert not p.done and pair.gs.refused[SigningVerdict.UNSIGNED] == 1
     pair.until(lambda: p.done, 2, "the vehicle's own ACK")
     assert p.ok
 

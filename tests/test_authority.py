@@ -1,4 +1,5 @@
-"""Who may change the vehicle (DESIGN §3.8-3.9), end to end through the MAVLink endpoint in simulated time."""
+"""Who may change the vehicle (docs/architecture.md §3.8-3.9), end to end through the MAVLink endpoint in simulated
+time."""
 
 from __future__ import annotations
 

@@ -289,7 +289,7 @@ def test_summary_csv_and_report_are_written(jam_campaign):
     assert len(lines) == 1 and lines[0]["scenario"] == "jam" and lines[0]["n"] == "1"
     report = (out / "report.md").read_text()
     assert f"returnlink sim run --replay {out} {trial.id}" in report
-    assert "| jam | rover | returnlink | 1 |" in report
+    assert '| jam | rover | returnlink | {"LNK_TIMEOUT": 2.0} | 1 |' in report  # each swept value its own line
     for png in ("time_to_link_cdf.png", "distance_cdf.png"):
         assert (out / png).read_bytes()[:4] == b"\x89PNG"
 

@@ -44,7 +44,7 @@ def test_sweep_starts_a_local_ray_and_writes_rows_summary_and_report(tmp_path, c
     assert "returnlink sim run --replay" in (out / "report.md").read_text()
     captured = capsys.readouterr()
     assert "2 to run on a local Ray" in captured.err and "2/2 trials" in captured.err
-    assert "| jam | rover | returnlink | 2 | 0 |" in captured.out
+    assert "| jam | rover | returnlink | - | 2 | 0 |" in captured.out  # "-": no parameter swept
 
 
 @pytest.fixture(scope="module")

@@ -2,19 +2,28 @@
 
 from __future__ import annotations
 
+import io
+import math
 import socket
 import subprocess
 import sys
-import time
+import threading
 
+import numpy as np
 import pytest
 
 from gcs.client import Client, GcsError
 from gcs.commands import COMMANDS
+from gcs.shell import Session, line_parser
 from link import dialect
 from sim.cli import main
+from sim.driver import SimDriver
+from sim.scenario import load
 from tests.interop import ServedVehicle, free_udp_port, wait_until
+from vehicle.app import DT, Vehicle
 from vehicle.lease import ExpireReason
+from vehicle.mavlink import Endpoint
+from vehicle.params import load_defaults
 
 mav = dialect.load()
 
@@ -33,25 +42,71 @@ def served():
         v.close()
 
 
-def test_shell_keeps_the_link_through_a_10_s_idle(served):
+class SimulatedLink:
+    """A vehicle in simulated time as a ``Client``'s whole world: its transport (frames in and out) and its clock.
+    Time moves only when someone waits: every ``sleep`` of the client or of the shell's background thread steps
+    the vehicle through the ticks that fall in it, so a station that stops pumping stops its own clock too."""
+
+    def __init__(self) -> None:
+        sc = load("open")
+        self.driver = SimDriver(sc, "rover", np.random.default_rng(1))
+        self.vehicle = Vehicle(self.driver, load_defaults(), sc.start, 0.0, seed=1)
+        self.endpoint = Endpoint(self.vehicle)
+        self.now, self.tick_t = 0.0, 0.0
+        self.out: list[bytes] = []
+        self.lock = threading.Lock()
+        self.until, self.reached = math.inf, threading.Event()
+
+    def clock(self) -> float:
+        return self.now
+
+    def sleep(self, seconds: float) -> None:
+        with self.lock:
+            self.now += seconds
+            while self.tick_t + DT <= self.now + 1e-9:
+                self.tick_t = round(self.tick_t + DT, 9)
+                self.vehicle.tick(self.tick_t)
+                self.driver.advance(DT)
+                self.out.extend(self.endpoint.tick(self.tick_t))
+            if self.now >= self.until:
+                self.reached.set()
+
+    # the transport the client sends and receives through
+    def send(self, frame: bytes) -> None:
+        with self.lock:
+            self.endpoint.receive(frame, self.tick_t)
+
+    def receive(self) -> list[tuple[bytes, None]]:
+        with self.lock:
+            out, self.out = self.out, []
+        return [(frame, None) for frame in out]
+
+    def close(self) -> None:
+        pass
+
+
+def test_shell_keeps_the_link_through_a_10_s_idle():
     """acquire -> plan -> arm -> 10 s of nobody typing: a one-shot CLI let the vehicle run a return chain in such a
-    gap; the shell's background thread keeps the owner heard while it waits for the next line, so no COMMS_LOST."""
-    proc = subprocess.Popen([sys.executable, "-m", "sim.cli", "gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}",
-                             "shell"], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        proc.stdin.write("# a mission script\nacquire\nplan upload --spec 'rtl:40 | loiter:10 | launch'\narm\n")
-        proc.stdin.flush()
-        wait_until(lambda: served.vehicle.armed, 20, "the script to arm the vehicle")
-        time.sleep(10)  # the operator thinks; the shell is blocked reading stdin
-        out, err = proc.communicate("status\n", timeout=20)
-    finally:
-        proc.kill() if proc.poll() is None else None
-    assert proc.returncode == 0, err
-    assert "in control: epoch" in out and "uploaded 5 items" in out and "state TELEOP" in out
-    assert "return plan: 5 items, 3 leases" in out  # STATUSTEXTs are printed as they arrive
-    reasons = [e.reason for e in served.vehicle.event_log]
-    assert ExpireReason.COMMS_LOST not in reasons
-    assert served.vehicle.book.owner == 255 and served.vehicle.armed
+    gap; the shell's background thread keeps the owner heard while it waits for the next line, so no COMMS_LOST.
+    In simulated time: the 10 s pass as fast as the background thread's waits step the vehicle."""
+    link = SimulatedLink()
+    client = Client("udpin:127.0.0.1:0", clock=link.clock, sleep=link.sleep)
+    client.transport.close()
+    client.transport = link
+    out = io.StringIO()
+    parser = line_parser()
+    with Session(client, out, sleep=link.sleep) as session:
+        for line in ("acquire", "plan upload --spec 'rtl:40 | loiter:10 | launch'", "arm"):
+            assert session.run_line(line, parser) == 0, out.getvalue()
+        assert link.vehicle.armed
+        link.until = link.now + 10.0  # the operator thinks; only the session's own thread talks meanwhile
+        assert link.reached.wait(20), "the shell stopped talking to the vehicle while it waited"
+        assert session.run_line("status", parser) == 0
+    text = out.getvalue()
+    assert "in control: epoch" in text and "uploaded 5 items" in text and "state TELEOP" in text
+    assert "return plan: 5 items, 3 leases" in text  # STATUSTEXTs are printed as they arrive
+    assert ExpireReason.COMMS_LOST not in [e.reason for e in link.vehicle.event_log]
+    assert link.vehicle.book.owner == 255 and link.vehicle.armed
 
 
 def test_shell_script_stops_at_the_first_refused_command(served):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import enum
 import math
 import subprocess
 import sys
@@ -12,6 +13,8 @@ import pytest
 from pymavlink import mavutil
 
 from link import dialect
+from vehicle.lease_terms import ExpireReason, Holder, State
+from vehicle.returning import Target
 
 rl = dialect.load()
 
@@ -57,6 +60,26 @@ def test_new_commands_pack_and_parse(cmd):
     item = roundtrip(rl.MAVLink_mission_item_int_message(1, 1, 0, 2, cid, 0, 1, 50, 1.5, -1, -1, 0, 0, 0, 0))
     assert item.command == cid and item.param1 == 50
     assert rl.enums["MAV_CMD"][cid].name == cmd
+
+
+def _dialect_entries(enum_name: str) -> dict[str, int]:
+    prefix = enum_name + "_"
+    return {e.name.removeprefix(prefix): v for v, e in rl.enums[enum_name].items()
+            if not e.name.endswith("_ENUM_END")}
+
+
+def _mirror_members(mirror: type) -> dict[str, int]:
+    if issubclass(mirror, enum.Enum):
+        return {m.name: int(m.value) for m in mirror}
+    return {k: v for k, v in vars(mirror).items() if k.isupper()}  # a class of int constants (State)
+
+
+@pytest.mark.parametrize(("mirror", "enum_name"), [(Holder, "LEASE_HOLDER"), (ExpireReason, "LEASE_EXPIRE_REASON"),
+                                                   (State, "RETURNLINK_STATE"), (Target, "RTL_TARGET")])
+def test_the_onboard_mirrors_of_dialect_enums_match_it_by_name_and_value(mirror, enum_name):
+    """The vehicle's own enums say on the wire what the dialect says they mean: every entry both ways, each name
+    with its value, so a new trigger or state cannot be sent under another one's number."""
+    assert _mirror_members(mirror) == _dialect_entries(enum_name)
 
 
 def test_any_pymavlink_program_can_use_the_dialect_by_name():

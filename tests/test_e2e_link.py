@@ -1,5 +1,5 @@
-"""Whole `sim run` missions for the link rules of DESIGN §6, on scenario variants written in a temporary directory:
-the symptoms were seen end to end, so they are checked end to end."""
+"""Whole `sim run` missions for the link rules of docs/architecture.md §6, on scenario variants written in a temporary
+directory: the symptoms were seen end to end, so they are checked end to end."""
 
 from __future__ import annotations
 
@@ -108,12 +108,11 @@ def test_weak_radio_settles_after_two_cycles(tmp_path, vehicle):
     assert [b.reason for b in r.blocks] == ["LINK_REGAINED"] * m["link_cycles"]
     assert sum(b.distance for b in r.blocks) <= 15.0, [b.distance for b in r.blocks]
     assert m["regained_by"] == "return" and m["passed"], m.get("failures")
-    # at the fringe the quality trigger may call the loss while lucky packets still come: the summary says so
-    # rather than printing a negative reaction after LNK_TIMEOUT
+    # at the fringe the quality trigger may call the loss while lucky packets still come: the reaction is measured
+    # from the moment delivery fell below LNK_MIN_Q, not from a silence that had not yet timed out, so never < 0
     said = metrics.summary(r, m)
-    if m["reaction_latency_s"] < 0:
-        assert "quality trigger: delivery below LNK_MIN_Q" in said and "after LNK_TIMEOUT" not in said
-    else:
-        assert f"reaction {m['reaction_latency_s']:.3f} s after LNK_TIMEOUT" in said
+    assert m["reaction_latency_s"] >= 0
+    assert f"reaction {m['reaction_latency_s']:.3f} s after the trigger's condition" in said
     if vehicle == "rover":
-        assert m["reaction_latency_s"] < 0  # this run's first loss is the quality trigger's
+        t_loss, heard = r.losses[0]
+        assert t_loss < heard + r.vehicle.params["LNK_TIMEOUT"]  # this run's first loss is the quality trigger's

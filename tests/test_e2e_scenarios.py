@@ -1,5 +1,5 @@
 """Whole missions in simulated time: every built-in scenario with both robots, against its own criteria and the
-product's promises (DESIGN §3, §6, §7)."""
+product's promises (docs/architecture.md §3, §6, §7)."""
 
 from __future__ import annotations
 
@@ -75,8 +75,8 @@ def test_return_begins_within_one_tick_of_the_timeout(name, vehicle):
     assert m["reaction_latency_s"] is not None
     assert m["reaction_latency_s"] <= DT + 1e-9
     if m["reaction_latency_s"] < -1e-9:
-        # before the silence timeout only on LNK_MIN_Q (DESIGN §3.5): over the LNK_TIMEOUT before the loss the
-        # radio's delivery probability was about that low (0.1 of slack: the vehicle counts some 30 packets, a
+        # before the silence timeout only on LNK_MIN_Q (docs/architecture.md §3.5): over the LNK_TIMEOUT before the loss
+        # the radio's delivery probability was about that low (0.1 of slack: the vehicle counts some 30 packets, a
         # random sample of it)
         params = r.vehicle.params
         k = int(round(r.losses[0][0] / DT)) - 1

@@ -1,4 +1,5 @@
-"""Boot epochs (DESIGN §3.1): a real-time vehicle never revives an epoch a delayed command may still carry."""
+"""Boot epochs (docs/architecture.md §3.1): a real-time vehicle never revives an epoch a delayed command may still
+carry."""
 
 from __future__ import annotations
 
@@ -111,3 +112,11 @@ def test_the_kept_file_steers_a_new_boot_away_from_the_last_ones(tmp_path):
     second = EpochLog(kept, same)
     assert second.earlier == (Span(4001, 4002),) and not Span(4001, 4002).covers(second.boot)
     assert EpochLog(None, same).boot == 4001  # nothing kept, nothing avoided
+
+
+def test_a_file_an_older_boot_wrote_still_reads():
+    """The header cites the architecture document now; a robot's file from before that must not stop its boot."""
+    from vehicle.epochs import LEGACY_HEADERS, parse
+
+    assert parse(LEGACY_HEADERS[0] + "\n12 14\n", "old.epochs") == parse(HEADER + "\n12 14\n", "new.epochs")
+    assert parse(HEADER + "\n12 14\n", "new.epochs")

@@ -4,7 +4,7 @@ holds still and says so; a message handler raising is counted and reported. Neit
 from __future__ import annotations
 
 from tests.harness import Pair
-from vehicle import app
+from vehicle import contingency
 from vehicle.app import State
 from vehicle.lease import ExpireReason, Holder
 from vehicle.mavlink import mav
@@ -25,7 +25,7 @@ def test_a_fault_in_the_service_step_ends_the_block_holds_and_reports(monkeypatc
     def broken(*args, **kwargs):
         raise RuntimeError("injected fault")
 
-    monkeypatch.setattr(app, "step_block", broken)
+    monkeypatch.setattr(contingency, "step_block", broken)
     r = pair.gs.rtl()
     pair.until(lambda: r.done, 2, "RTL ACK")
     pair.step(1.0)
@@ -43,7 +43,7 @@ def test_a_fault_in_the_service_step_ends_the_block_holds_and_reports(monkeypatc
 
 def test_a_fault_when_the_service_starts_is_contained_the_same_way(monkeypatch):
     pair = returning(Pair())
-    monkeypatch.setattr(app, "start_block", lambda *a, **k: 1 / 0)
+    monkeypatch.setattr(contingency, "start_block", lambda *a, **k: 1 / 0)
     e = pair.gs.expire()
     pair.until(lambda: e.done, 2, "expire ACK")
     pair.step(1.0)

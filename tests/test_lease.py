@@ -231,8 +231,8 @@ def test_new_epoch_differs_from_previous():
 
 
 def test_a_running_return_is_never_taken_over_and_a_silent_owner_after_it_is():
-    """DESIGN §3.8, as a timeline: the owner falls silent at 0 s; from 3 s the return holds the lease, and no
-    other station takes the root, neither explicitly nor by auto-grant, even though the owner is stale; once the
+    """docs/architecture.md §3.8, as a timeline: the owner falls silent at 0 s; from 3 s the return holds the lease, and
+    no other station takes the root, neither explicitly nor by auto-grant, even though the owner is stale; once the
     chain has ended (AWAITING_CLAIM) the silent owner may be taken over."""
     book = LeaseBook(config=LeaseConfig(link_timeout=3.0, stale_take=True)).acquire(GCS, 190, 0.0, seed=7).book
     assert book.take_refusal(OTHER, 1.0) == f"owned by GCS {GCS}; takeover not allowed"  # owner still fresh

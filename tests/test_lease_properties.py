@@ -1,5 +1,6 @@
 """Property-based tests: random sequences of everything a ground station, the link and the return service can do
-to the lease book, checked against the invariants of DESIGN §3 and an independent model of the owner's link."""
+to the lease book, checked against the invariants of docs/architecture.md §3 and an independent model of the owner's
+link."""
 
 from __future__ import annotations
 
@@ -77,7 +78,7 @@ class LeaseMachine(RuleBasedStateMachine):
                 self.enqueued.remove(q)
         if before.owner != after.owner or before.epoch != after.epoch:
             self._reset_link_model(after)
-            # DESIGN §3.8: a running return is never taken over by another station
+            # docs/architecture.md §3.8: a running return is never taken over by another station
             assert after.owner is None or before.owner in (None, after.owner) or not before.returning
         self.book = after
 

@@ -1,5 +1,6 @@
 """The owner's link watch as timelines (PX4 failsafe_test style): time is advanced by hand and the trigger is
-checked after each step. One story per rule of DESIGN §3.5 and §6 "Where the return ends" about the link."""
+checked after each step. One story per rule of docs/architecture.md §3.5 and §6 "Where the return ends" about the link.
+"""
 
 from __future__ import annotations
 
@@ -86,11 +87,19 @@ def test_contact_from_before_the_loss_never_counts_as_regained():
     assert 6.8 - 1e-9 <= st.triggers[1][0] <= 6.8 + 0.021
 
 
-def test_timeout_deadline_is_not_missed_by_float_error():
-    w = LinkWatch(cfg()).heard(30.8, 0)
-    assert 33.8 - 30.8 < 3.0  # the float trap itself
-    _, trig = w.step(33.8)
-    assert trig is Trigger.LOST
+def test_lost_fires_on_the_tick_the_timeout_ends_whatever_the_clock_reads():
+    """LNK_TIMEOUT after the last packet is a tick's deadline: the tick that reaches it fires LOST, never the one
+    after, though tick times are floats (the runner's k / 50) whose differences are not exact (heard at 30.8 s,
+    the tick at 33.8 s is 2.9999999999999964 s later)."""
+    for k0 in range(0, 5000, 7):
+        w = LinkWatch(cfg()).heard(k0 / 50, 0)
+        fired = None
+        for n in range(1, 200):
+            w, trig = w.step((k0 + n) / 50)
+            if trig is Trigger.LOST:
+                fired = n
+                break
+        assert fired == 150, (k0 / 50, fired)  # 3.0 s of 20 ms ticks
 
 
 def test_reordering_and_duplicates_are_not_loss():

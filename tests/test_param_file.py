@@ -1,4 +1,5 @@
-"""Nothing is lost on a crash (DESIGN §8): the vehicle's .parm is replaced atomically and read strictly at boot."""
+"""Nothing is lost on a crash (docs/architecture.md §8): the vehicle's .parm is replaced atomically and read strictly at
+boot."""
 
 from __future__ import annotations
 

@@ -36,3 +36,22 @@ def test_parm_round_trip_and_errors():
     assert params.parse_parm("RTL_SPEED,1.5\n")["RTL_SPEED"] == 1.5  # comma form
     with pytest.raises(ParamError, match="x.parm:2"):
         params.parse_parm("LNK_TIMEOUT 3\nRTL_SPEED fast\n", "x.parm")
+
+
+def test_every_feature_config_starts_from_the_parameter_table():
+    """Each feature's Config takes its defaults from the table and maps the same parameters in from_params: a
+    vehicle booted on the defaults runs exactly the configs a bare ``Config()`` describes."""
+    from vehicle.lease import LeaseConfig
+    from vehicle.link_watch import WatchConfig
+    from vehicle.navigation import FollowerConfig
+    from vehicle.trail import TrailConfig
+
+    defaults = Params()
+    for config in (LeaseConfig, WatchConfig, TrailConfig, FollowerConfig):
+        assert config.from_params(defaults) == config(), config.__name__
+    assert LeaseConfig().watch == WatchConfig()
+    changed = Params({"LNK_TIMEOUT": 7.0, "TRL_TOL": 0.5, "RTL_ARRIVE_R": 2.0, "LEASE_STALE_TAKE": 0})
+    assert LeaseConfig.from_params(changed).link_timeout == WatchConfig.from_params(changed).timeout == 7.0
+    assert TrailConfig.from_params(changed).tolerance == 0.5
+    assert FollowerConfig.from_params(changed).arrive_radius == 2.0
+    assert LeaseConfig.from_params(changed).stale_take is False

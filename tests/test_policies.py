@@ -1,6 +1,6 @@
-"""The link-loss policies of DESIGN §9 flown end to end on the same vehicle and simulator, and the paired trials
-that make them comparable: each baseline shows its anchor's documented behaviour, and a trial and its baseline are
-identical until the link is lost."""
+"""The link-loss policies of docs/architecture.md §9 flown end to end on the same vehicle and simulator, and the paired
+trials that make them comparable: each baseline shows its anchor's documented behaviour, and a trial and its baseline
+are identical until the link is lost."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import sim
 from link.radio import LinkState, Radio, RadioParams, subsystem_rng
 from sim import metrics
 from sim.driver import SimDriver
-from sim.policies import POLICY_NAMES, check_policy, make_policy
+from sim.policies import NATIVE_POLICIES, check_policy, make_policy
 from sim.policies.smartrtl import FS_TIMEOUT, SmartRTL, SmartRTLPath
 from sim.runner import Run
 from sim.scenario import load
@@ -52,7 +52,7 @@ def _variant(tmp_path: Path, base: str, replace: tuple[str, str]) -> Path:
 
 def test_policy_names_are_checked_and_returnlink_injects_nothing():
     assert make_policy("returnlink") is None
-    assert all(make_policy(p) is not None for p in POLICY_NAMES if p != "returnlink")
+    assert all(make_policy(p) is not None for p in NATIVE_POLICIES if p != "returnlink")
     with pytest.raises(ValueError, match="unknown policy 'bogus'"):
         check_policy("bogus")
     with pytest.raises(ValueError, match="unknown policy"):

@@ -133,8 +133,8 @@ class _FakeLink:
 
 
 def test_sim_serve_answers_a_command_in_the_tick_it_arrived():
-    """DESIGN §8: a COMMAND_LONG read at one tick is answered before the loop sleeps toward the next (the clock is
-    injected: simulated time only)."""
+    """docs/architecture.md §8: a COMMAND_LONG read at one tick is answered before the loop sleeps toward the next (the
+    clock is injected: simulated time only)."""
     from sim.scenario import load
     from sim.serve import Server
     from vehicle.mavlink import mav

@@ -1,4 +1,4 @@
-"""The command retry window (DESIGN §3.9): every command of the last 3 s per sender, answered once."""
+"""The command retry window (docs/architecture.md §3.9): every command of the last 3 s per sender, answered once."""
 
 from __future__ import annotations
 

@@ -1,5 +1,6 @@
-"""DESIGN §6 "Where the return ends", one story per rule, on the whole vehicle (MAVLink both ways, simulated
-robot, perfect radio that a test can cut): time is advanced by hand and the decision checked after each step."""
+"""docs/architecture.md §6 "Where the return ends", one story per rule, on the whole vehicle (MAVLink both ways,
+simulated robot, perfect radio that a test can cut): time is advanced by hand and the decision checked after each step.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""The auto-return service driving a simulated robot: blocks complete, give up or get stuck as DESIGN §6 says."""
+"""The auto-return service driving a simulated robot: blocks complete, give up or get stuck as docs/architecture.md §6
+says."""
 
 from __future__ import annotations
 
@@ -76,8 +77,8 @@ def _dist(rig, target) -> float:
 
 
 def test_return_to_link_passes_the_last_good_crumb_and_goes_on_while_the_link_stays_down():
-    """DESIGN §6: a RETURN_TO_LINK block that reaches its target without the link being back keeps going back
-    along the trail, within its displacement budget (here the link never comes back)."""
+    """docs/architecture.md §6: a RETURN_TO_LINK block that reaches its target without the link being back keeps going
+    back along the trail, within its displacement budget (here the link never comes back)."""
     s, rig = outbound()
     good = rig.trail.link_good()
     target = rig.trail.points()[int(np.flatnonzero(good)[-1])]

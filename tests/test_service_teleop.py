@@ -24,7 +24,8 @@ def stick(x: int, r: int, target: int = 1):
     return mav.MAVLink_manual_control_message(target, x, 0, 500, r, 0)
 
 
-def velocity(vx: float, vy: float, yaw_rate: float | None, frame: int = mav.MAV_FRAME_BODY_NED, mask: int | None = None):
+def velocity(vx: float, vy: float, yaw_rate: float | None, frame: int = mav.MAV_FRAME_BODY_NED,
+             mask: int | None = None):
     if mask is None:
         mask = VELOCITY if yaw_rate is None else VELOCITY_YAW_RATE
     return mav.MAVLink_set_position_target_local_ned_message(0, 1, 1, frame, mask, 0, 0, 0, vx, vy, 0, 0, 0, 0, 0,
@@ -71,7 +72,8 @@ def test_a_non_finite_velocity_is_refused_before_it_reaches_the_vehicle(bad):
 def test_a_stranger_s_stream_is_refused_and_told_once_every_gap():
     kit, teleop = owned()
     told = []
-    for k in range(int(3 * REJECT_NOTICE_GAP / 0.1)):  # 10 Hz for three gaps
+    for k in range(int(3 * REJECT_NOTICE_GAP / 0.1)):  # 10 Hz for three gaps, the owner heard throughout
+        kit.vehicle.heard(OWNER, k * 0.1, k)
         told += texts(kit.send(teleop, stick(1000, 0), sysid=STRANGER, t=k * 0.1))
     assert told == [f"teleop from {STRANGER} refused: sender does not own the vehicle"] * 3
     assert kit.vehicle.setpoint is None

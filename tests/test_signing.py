@@ -1,5 +1,5 @@
-"""MAVLink 2 signing, one behaviour per test (DESIGN §4.1): the pure verifier, key and timestamp files, and the
-vehicle's signing clock across a reboot."""
+"""MAVLink 2 signing, one behaviour per test (docs/architecture.md §4.1): the pure verifier, key and timestamp files,
+and the vehicle's signing clock across a reboot."""
 
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ from link.signing import (
     NEW_STREAM_WINDOW,
     Key,
     KeyFileError,
+    SigningVerdict,
     Streams,
-    Verdict,
     enable,
     load_key,
     parse_key,
@@ -69,7 +69,7 @@ def forged(timestamp: int, sysid: int = 255, compid: int = 190, link_id: int = 0
 def test_a_frame_signed_with_the_key_is_accepted_and_starts_its_stream():
     frame = signed_heartbeat(KEY, NOW)
     streams, verdict = Streams().verify(KEY, frame, NOW)
-    assert verdict is Verdict.ACCEPT
+    assert verdict is SigningVerdict.ACCEPT
     assert streams.last == {(255, 190, 0): NOW}
 
 
@@ -80,47 +80,47 @@ def test_our_signature_is_the_one_pymavlink_computes():
 
 
 def test_unsigned_and_wrong_key_frames_are_named():
-    assert Streams().verify(KEY, unsigned_heartbeat(), NOW)[1] is Verdict.UNSIGNED
-    assert Streams().verify(KEY, signed_heartbeat(OTHER, NOW), NOW)[1] is Verdict.BAD_SIGNATURE
+    assert Streams().verify(KEY, unsigned_heartbeat(), NOW)[1] is SigningVerdict.UNSIGNED
+    assert Streams().verify(KEY, signed_heartbeat(OTHER, NOW), NOW)[1] is SigningVerdict.BAD_SIGNATURE
 
 
 def test_a_forged_frame_never_moves_a_streams_timestamp():
     streams, _ = Streams().verify(KEY, signed_heartbeat(KEY, NOW), NOW)
     far_future = NOW + 10**12
     after, verdict = streams.verify(KEY, forged(far_future), NOW)
-    assert verdict is Verdict.BAD_SIGNATURE
+    assert verdict is SigningVerdict.BAD_SIGNATURE
     assert after == streams  # untouched: the owner's next genuine frame still gets in
-    assert after.verify(KEY, signed_heartbeat(KEY, NOW + 1), NOW)[1] is Verdict.ACCEPT
+    assert after.verify(KEY, signed_heartbeat(KEY, NOW + 1), NOW)[1] is SigningVerdict.ACCEPT
 
 
 def test_a_forged_frame_never_opens_a_stream():
     after, verdict = Streams().verify(KEY, forged(NOW + 10**12, sysid=42), NOW)
-    assert verdict is Verdict.BAD_SIGNATURE and after.last == {}
+    assert verdict is SigningVerdict.BAD_SIGNATURE and after.last == {}
 
 
 def test_a_replayed_frame_is_refused():
     frame = signed_heartbeat(KEY, NOW)
     streams, _ = Streams().verify(KEY, frame, NOW)
-    assert streams.verify(KEY, frame, NOW)[1] is Verdict.REPLAY
-    assert streams.verify(KEY, signed_heartbeat(KEY, NOW - 1), NOW)[1] is Verdict.REPLAY
+    assert streams.verify(KEY, frame, NOW)[1] is SigningVerdict.REPLAY
+    assert streams.verify(KEY, signed_heartbeat(KEY, NOW - 1), NOW)[1] is SigningVerdict.REPLAY
 
 
 def test_streams_are_per_sysid_compid_and_link_id():
     streams, _ = Streams().verify(KEY, signed_heartbeat(KEY, NOW), NOW)
     for other in (dict(sysid=254), dict(compid=191), dict(link_id=1)):
-        assert streams.verify(KEY, signed_heartbeat(KEY, NOW, **other), NOW)[1] is Verdict.ACCEPT
+        assert streams.verify(KEY, signed_heartbeat(KEY, NOW, **other), NOW)[1] is SigningVerdict.ACCEPT
 
 
 def test_a_new_stream_may_be_at_most_60_s_behind_our_clock():
     assert NEW_STREAM_WINDOW == 60 * 100_000
-    assert Streams().verify(KEY, signed_heartbeat(KEY, NOW - NEW_STREAM_WINDOW), NOW)[1] is Verdict.ACCEPT
-    assert Streams().verify(KEY, signed_heartbeat(KEY, NOW - NEW_STREAM_WINDOW - 1), NOW)[1] is Verdict.TOO_OLD
+    assert Streams().verify(KEY, signed_heartbeat(KEY, NOW - NEW_STREAM_WINDOW), NOW)[1] is SigningVerdict.ACCEPT
+    assert Streams().verify(KEY, signed_heartbeat(KEY, NOW - NEW_STREAM_WINDOW - 1), NOW)[1] is SigningVerdict.TOO_OLD
 
 
 def test_the_60_s_rule_is_for_new_streams_only():
     old = NOW - 10 * NEW_STREAM_WINDOW
     streams, _ = Streams().verify(KEY, signed_heartbeat(KEY, old), old)
-    assert streams.verify(KEY, signed_heartbeat(KEY, old + 1), NOW)[1] is Verdict.ACCEPT
+    assert streams.verify(KEY, signed_heartbeat(KEY, old + 1), NOW)[1] is SigningVerdict.ACCEPT
 
 
 def test_signing_timestamps_count_10_us_since_2015():
@@ -144,8 +144,8 @@ def test_property_accepted_timestamps_only_grow_and_forgeries_change_nothing(ste
         stream = signature_block(frame).stream
         after, verdict = streams.verify(KEY, frame, NOW)
         if kind == "forged":
-            assert verdict is Verdict.BAD_SIGNATURE and after == streams
-        if verdict is Verdict.ACCEPT:
+            assert verdict is SigningVerdict.BAD_SIGNATURE and after == streams
+        if verdict is SigningVerdict.ACCEPT:
             assert timestamp_of(frame) > newest.get(stream, -1)
             newest[stream] = timestamp_of(frame)
         else:
@@ -162,7 +162,7 @@ def test_property_no_altered_frame_is_accepted(data):
     frame = bytearray(signed_heartbeat(KEY, NOW))
     position = data.draw(st.integers(0, len(frame) - 1))
     frame[position] ^= data.draw(st.integers(1, 255))
-    assert Streams().verify(KEY, bytes(frame), NOW)[1] is not Verdict.ACCEPT
+    assert Streams().verify(KEY, bytes(frame), NOW)[1] is not SigningVerdict.ACCEPT
 
 
 # ----- key files -----------------------------------------------------------------------------------------------
@@ -268,4 +268,4 @@ def test_every_frame_the_keyed_vehicle_sends_is_signed():
     streams = Streams()
     for f in pair.heard:
         streams, verdict = streams.verify(KEY, f, sim_stamp(pair.t))
-        assert verdict is Verdict.ACCEPT
+        assert verdict is SigningVerdict.ACCEPT

@@ -9,7 +9,7 @@ import stat
 
 import pytest
 
-from link.signing import Key, Verdict
+from link.signing import Key, SigningVerdict
 from sim.cli import main
 from tests.interop import ServedVehicle
 from vehicle.keystore import read_key, stamp_path, write_key
@@ -67,8 +67,8 @@ def test_gcs_with_the_key_flies_and_without_it_only_watches(keyed_vehicle, capsy
     assert main([*url, "--key", str(path), "acquire"]) == 0
     assert main([*url, "--key", str(path), "param", "set", "LNK_TIMEOUT", "5"]) == 0
     assert served.vehicle.book.owner == 255 and served.vehicle.params["LNK_TIMEOUT"] == 5.0
-    assert served.server.endpoint.counters.signing[Verdict.UNSIGNED] > 0
-    assert served.server.endpoint.counters.signing[Verdict.ACCEPT] > 0
+    assert served.server.endpoint.counters.signing[SigningVerdict.UNSIGNED] > 0
+    assert served.server.endpoint.counters.signing[SigningVerdict.ACCEPT] > 0
     capsys.readouterr()
     served.server.close()  # shutdown saves the signing timestamp beside the key
     assert int(stamp_path(path).read_text()) > 0

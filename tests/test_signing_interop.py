@@ -1,5 +1,5 @@
-"""Real clients against a keyed vehicle over loopback UDP (DESIGN §4.1): MAVProxy with its signing module flies
-it; MAVSDK 4, which cannot sign, can watch it (telemetry, parameter download) but not act on it."""
+"""Real clients against a keyed vehicle over loopback UDP (docs/architecture.md §4.1): MAVProxy with its signing module
+flies it; MAVSDK 4, which cannot sign, can watch it (telemetry, parameter download) but not act on it."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from mavsdk.plugins.action import Action
 from mavsdk.plugins.param import Param
 from mavsdk.plugins.telemetry import Telemetry
 
-from link.signing import Key, Verdict
+from link.signing import Key, SigningVerdict
 from tests.interop import MAVProxy, ServedVehicle, wait_until
 from vehicle.app import State
 from vehicle.keystore import write_key
@@ -51,7 +51,7 @@ def test_mavproxy_with_the_signing_module_flies_a_keyed_vehicle(keyed, tmp_path)
         wait_until(lambda: "DO_SET_MODE: ACCEPTED" in log.read_text(), 10, "DO_SET_MODE accepted")
         # the operator lease expired: the return plan ran (at the start of the adit there is no trail to follow)
         assert any(e.reason.name == "OPERATOR_EXPIRE" for e in served.vehicle.event_log)
-        assert served.server.endpoint.counters.signing[Verdict.ACCEPT] > 0
+        assert served.server.endpoint.counters.signing[SigningVerdict.ACCEPT] > 0
     finally:
         mp.close()
 
@@ -76,6 +76,6 @@ def test_mavsdk_can_watch_a_keyed_vehicle_but_not_act(keyed):
         time.sleep(0.3)
         assert served.vehicle.params["LNK_TIMEOUT"] == 3.0
         assert served.vehicle.book.owner is None and served.vehicle.state() == State.NO_OWNER
-        assert served.server.endpoint.counters.signing[Verdict.UNSIGNED] > 0
+        assert served.server.endpoint.counters.signing[SigningVerdict.UNSIGNED] > 0
     finally:
         sdk.destroy()

@@ -1,4 +1,4 @@
-"""Files the vehicle keeps are replaced atomically and read strictly (DESIGN §8)."""
+"""Files the vehicle keeps are replaced atomically and read strictly (docs/architecture.md §8)."""
 
 from __future__ import annotations
 

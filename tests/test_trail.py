@@ -1,5 +1,5 @@
-"""Breadcrumb trail invariants (DESIGN §6) on random walks with loops, and the return planner on the patent's
-FIG. 4A-4C situations."""
+"""Breadcrumb trail invariants (docs/architecture.md §6) on random walks with loops, and the return planner on the
+patent's FIG. 4A-4C situations."""
 
 from __future__ import annotations
 
@@ -217,7 +217,7 @@ def test_a_partial_fold_back_is_cut_and_the_leg_off_it_kept():
 def test_a_fold_back_keeps_the_return_target_and_the_tags_of_its_own_crumbs():
     """Out with the link good, a commanded return backs up over the track (its own crumbs tagged good, as they
     were), then the link dies: the target is the last good crumb, on the folded part, and the way on from it
-    (a dead zone) leads toward the start, not out to the turn point (DESIGN §6)."""
+    (a dead zone) leads toward the start, not out to the turn point (docs/architecture.md §6)."""
     trail = Trail(TrailConfig(spacing=0.2, tolerance=0.1, loop_distance=1.0))
     walk = fold_drive(7.0)
     walk += [(7.0 - 0.25 * k, 0.0) for k in range(1, 3)]  # on back, the link now lost

@@ -1,4 +1,5 @@
-"""Boot epochs of a real-time vehicle (DESIGN §3.1): random at every boot, never one a delayed command may carry.
+"""Boot epochs of a real-time vehicle (docs/architecture.md §3.1): random at every boot, never one a delayed command may
+carry.
 
 A command carries the epoch of the root it was sent under, and the lease book rejects every other epoch
 (WRONG_EPOCH). That guard only holds across a restart if the new life does not issue an epoch the old one used: a
@@ -25,7 +26,8 @@ SPACE = 0xFFFF  # epochs are 1..65535 and count up, 65535 wrapping to 1 (0 means
 HEADROOM = 1024  # epochs one boot may issue (acquisitions) before its range could near an earlier boot's
 KEEP = 8  # boots remembered: their ranges plus headroom cover at most an eighth of the space
 TRIES = 64  # random draws before falling back to counting on from the newest range
-HEADER = "# returnlink epochs issued by recent boots: FIRST LAST (DESIGN 3.1)"
+HEADER = "# returnlink epochs issued by recent boots: FIRST LAST (docs/architecture.md §3.1)"
+LEGACY_HEADERS = ("# returnlink epochs issued by recent boots: FIRST LAST (DESIGN 3.1)",)  # files older boots wrote
 
 
 @dataclass(frozen=True)
@@ -69,7 +71,7 @@ def parse(text: str, path: str | Path) -> tuple[Span, ...]:
     if not text.endswith("\n"):
         raise StoredFileError(path, text.count("\n") + 1, "incomplete last line (no newline at the end of the file)")
     lines = text.split("\n")[:-1]
-    if lines[0] != HEADER:
+    if lines[0] != HEADER and lines[0] not in LEGACY_HEADERS:
         raise StoredFileError(path, 1, f"expected the header {HEADER!r}")
     spans = []
     for n, line in enumerate(lines[1:], 2):

@@ -32,6 +32,9 @@ class Readings(NamedTuple):
 
 
 class RobotDriver(Protocol):
+    """``mav_type`` is the HEARTBEAT type the vehicle reports (a composition may override it, as the companion's
+    does: ``vehicle.endpoint.Endpoint``)."""
+
     mav_type: int
 
     def command(self, speed: float, yaw_rate: float) -> None: ...

@@ -1,4 +1,4 @@
-"""The vehicle's signing key and signing timestamp on disk (DESIGN §4.1).
+"""The vehicle's signing key and signing timestamp on disk (docs/architecture.md §4.1).
 
 Two small files side by side: ``FILE`` holds the key (one line of 64 hex characters, mode 0600) and
 ``FILE.stamp`` the last signing timestamp the vehicle used. The timestamp file exists because a robot's clock is

@@ -1,4 +1,5 @@
-"""The owner's link, watched in one place: is it up, is it good, has it just been lost or regained (DESIGN §3.5, §6).
+"""The owner's link, watched in one place: is it up, is it good, has it just been lost or regained
+(docs/architecture.md §3.5, §6).
 
 Why a value of its own (STYLE §2, Spot's ``LeaseKeepAlive`` beside its ``LeaseWallet``): the lease ledger decides
 *what happens* on COMMS_LOST and LINK_REGAINED; this module decides *whether* they happened. Both were spread over
@@ -28,8 +29,12 @@ from __future__ import annotations
 import enum
 from bisect import bisect_right
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
-from vehicle.frozen import evolve
+from link.parameters import default
+
+if TYPE_CHECKING:
+    from vehicle.params import Params
 
 EPS = 1e-6  # s: deadline tolerance (far below the 20 ms tick, far above float error)
 GOOD_QUALITY = 0.8  # delivery at or above this is a good link (crumb tags, continuous contact)
@@ -48,20 +53,20 @@ class Trigger(enum.Enum):
     REGAINED = "regained"
 
 
-# ``Trigger.NONE`` as a module-level name: an enum member read through its class costs more than a function call,
-# and ``step`` answers it on nearly every tick
-_NO_TRIGGER = Trigger.NONE
-
-
 @dataclass(frozen=True)
 class WatchConfig:
-    """The LNK_* parameters the watch depends on."""
+    """The LNK_* parameters the watch depends on; defaults from the parameter table."""
 
-    timeout: float = 3.0  # LNK_TIMEOUT
-    regain_s: float = 1.0  # LNK_REGAIN_S
-    contact_gap: float = 1.5  # LNK_GOOD_S: the longest silence that still counts as continuous contact
-    min_quality: float = 0.25  # LNK_MIN_Q (0 = silence only)
+    timeout: float = default("LNK_TIMEOUT")
+    regain_s: float = default("LNK_REGAIN_S")
+    contact_gap: float = default("LNK_GOOD_S")  # the longest silence that still counts as continuous contact
+    min_quality: float = default("LNK_MIN_Q")  # 0 = silence only
     window: float = 1.0  # s: the delivery estimate behind "good" covers about this long
+
+    @classmethod
+    def from_params(cls, params: Params) -> WatchConfig:
+        return cls(timeout=params["LNK_TIMEOUT"], regain_s=params["LNK_REGAIN_S"],
+                   contact_gap=params["LNK_GOOD_S"], min_quality=params["LNK_MIN_Q"])
 
 
 @dataclass(frozen=True)
@@ -85,16 +90,16 @@ class Delivery:
             return Delivery(((t, seq),), seq, t, 0)
         d = (seq - self.newest) % SEQ_SPACE
         if d == 0:
-            return evolve(self, last_t=t, repeats=self.repeats + 1)
+            return replace(self, last_t=t, repeats=self.repeats + 1)
         if d < SEQ_SPACE // 2:
             u = self.newest + d
             return Delivery(_trim((*self.arrivals, (t, u)), t - horizon), u, t, 0)
         u = self.newest - (SEQ_SPACE - d)  # behind the newest: a late packet or a duplicate of one
         first_t, first_u = self.arrivals[0]
         if any(a == u for _, a in self.arrivals) or (u < first_u and first_t <= t - horizon):
-            return evolve(self, last_t=t)  # a duplicate, or older than the window remembers
+            return replace(self, last_t=t)  # a duplicate, or older than the window remembers
         arrivals = tuple(sorted((*self.arrivals, (t, u)), key=lambda a: a[1]))
-        return evolve(self, arrivals=_trim(arrivals, t - horizon), last_t=t)
+        return replace(self, arrivals=_trim(arrivals, t - horizon), last_t=t)
 
     def _may_have_wrapped(self, silence: float) -> bool:
         """Whether the sender, at its rate over the window (``interval``), may have sent half a sequence space
@@ -118,7 +123,7 @@ class Delivery:
         a = self.arrivals
         if len(a) < 2:
             return None
-        times = [x for x, _ in a]  # (a list and two builtins: half the cost of two generators, every packet)
+        times = [x for x, _ in a]
         span_t = max(times) - min(times)
         span_u = a[-1][1] - a[0][1]
         return span_t / span_u if span_t > 0 and span_u > 0 else None
@@ -228,11 +233,11 @@ class LinkWatch:
             q, q_timeout = delivery.ratios(t, cfg.window, cfg.timeout)
             low = _low(delivery, t, cfg, q_timeout)
         if not (seq is None or _good(q)):
-            return evolve(self, last_heard=t, contact_since=None, contact_packets=0, delivery=delivery,
+            return replace(self, last_heard=t, contact_since=None, contact_packets=0, delivery=delivery,
                            quality_heard=q, low=low)
         unbroken = (self.contact_since is not None and self.last_heard is not None
                     and t - self.last_heard <= cfg.contact_gap + EPS)
-        return evolve(self, last_heard=t, contact_since=self.contact_since if unbroken else t, last_good=t,
+        return replace(self, last_heard=t, contact_since=self.contact_since if unbroken else t, last_good=t,
                        contact_packets=self.contact_packets + 1 if unbroken else 1,
                        delivery=delivery, quality_heard=q, low=low)
 
@@ -240,19 +245,19 @@ class LinkWatch:
         """Evaluate the deadlines at ``t``: LOST, REGAINED or nothing."""
         last = self.last_heard
         if last is None:
-            return self, _NO_TRIGGER
+            return self, Trigger.NONE
         cfg = self.config
-        age = t - last  # (``age``, written out: this runs every tick)
+        age = t - last
         if not self.lost:
             if age >= cfg.timeout - EPS or self.low:
                 # contact from before the loss never counts toward the regain
                 return replace(self, lost=True, contact_since=None, contact_packets=0), Trigger.LOST
-            return self, _NO_TRIGGER
+            return self, Trigger.NONE
         if (self.contact_since is not None and age <= cfg.contact_gap + EPS
                 and t - self.contact_since >= cfg.regain_s - EPS
                 and (self.delivery.newest is None or self.contact_packets >= REGAIN_PACKETS)):
             return replace(self, lost=False), Trigger.REGAINED
-        return self, _NO_TRIGGER
+        return self, Trigger.NONE
 
     def with_config(self, config: WatchConfig) -> LinkWatch:
         t = self.last_heard
@@ -269,14 +274,11 @@ class LinkWatch:
 
     def good(self, t: float) -> bool:
         """The link tag of a crumb laid now: the owner heard within LNK_GOOD_S, with a good measured delivery
-        (or no sequence numbers to measure it by). (Asked every tick: ``age`` and ``_good`` written out.)"""
-        last = self.last_heard
-        if last is None or t - last > self.config.contact_gap + EPS:
+        (or no sequence numbers to measure it by)."""
+        age = self.age(t)
+        if age is None or age > self.config.contact_gap + EPS:
             return False
-        if self.delivery.newest is None:
-            return True
-        q = self.quality_heard
-        return q is not None and q >= GOOD_QUALITY - EPS
+        return self.delivery.newest is None or _good(self.quality_heard)
 
 
 def _low(delivery: Delivery, t: float, cfg: WatchConfig, q_timeout: float | None) -> bool:

@@ -10,8 +10,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from link import dialect
-from link.modes import (
+from link.modes import (  # noqa: F401 - the mode numbers, re-exported for the vehicle's readers
+    AP_ACRO,
     AP_AUTO,
+    AP_HOLD,
     AP_MANUAL,
     AP_RTL,
     AP_SMART_RTL,
@@ -22,27 +24,26 @@ from link.modes import (
     PX4_AUTO_RTL,
     PX4_MANUAL,
     PX4_POSCTL,
-    px4_mode,
 )
-from vehicle.app import State
+from vehicle.lease_terms import State
 
-mav = dialect.load()
+CUSTOM_MODE_ENABLED = dialect.load().MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 
 
 def custom_mode(state: int, holding: bool) -> int:
     """The PX4 custom_mode that shows a RETURNLINK_STATE."""
     if state == State.TELEOP and not holding:
-        return px4_mode(PX4_POSCTL)
+        return PX4_POSCTL << 16
     if state == State.RETURNING:
-        return px4_mode(PX4_AUTO, PX4_AUTO_RTL)
+        return (PX4_AUTO << 16) | (PX4_AUTO_RTL << 24)
     if state == State.NAVIGATING:
-        return px4_mode(PX4_AUTO, PX4_AUTO_MISSION)
-    return px4_mode(PX4_AUTO, PX4_AUTO_LOITER)
+        return (PX4_AUTO << 16) | (PX4_AUTO_MISSION << 24)
+    return (PX4_AUTO << 16) | (PX4_AUTO_LOITER << 24)
 
 
 def decode_mode(base: int, custom: int, sub: int) -> str | None:
     """DO_SET_MODE in the PX4 encoding (main/sub) or the ArduPilot Rover numbering -> HOLD / RTL / MANUAL."""
-    if not base & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+    if not base & CUSTOM_MODE_ENABLED:
         return None
     if custom == PX4_AUTO:
         if sub in (PX4_AUTO_RTL, PX4_AUTO_MISSION):
@@ -62,6 +63,7 @@ def decode_mode(base: int, custom: int, sub: int) -> str | None:
 # from these answers instead of guessing from the autopilot type, so the vehicle can stay MAV_AUTOPILOT_GENERIC
 # with PX4-encoded custom modes without claiming to be PX4. Standard modes carry no name (the ground station names
 # them); the one mode with no standard equivalent, teleoperation under the operator lease, is named.
+STANDARD_NON_STANDARD, STANDARD_POSITION_HOLD, STANDARD_SAFE_RECOVERY, STANDARD_MISSION = 0, 1, 5, 6
 
 
 @dataclass(frozen=True)
@@ -72,10 +74,10 @@ class ModeInfo:
 
 
 AVAILABLE_MODES: tuple[ModeInfo, ...] = (
-    ModeInfo(mav.MAV_STANDARD_MODE_NON_STANDARD, px4_mode(PX4_POSCTL), "TELEOP"),
-    ModeInfo(mav.MAV_STANDARD_MODE_POSITION_HOLD, px4_mode(PX4_AUTO, PX4_AUTO_LOITER), ""),
-    ModeInfo(mav.MAV_STANDARD_MODE_SAFE_RECOVERY, px4_mode(PX4_AUTO, PX4_AUTO_RTL), ""),
-    ModeInfo(mav.MAV_STANDARD_MODE_MISSION, px4_mode(PX4_AUTO, PX4_AUTO_MISSION), ""),
+    ModeInfo(STANDARD_NON_STANDARD, PX4_POSCTL << 16, "TELEOP"),
+    ModeInfo(STANDARD_POSITION_HOLD, (PX4_AUTO << 16) | (PX4_AUTO_LOITER << 24), ""),
+    ModeInfo(STANDARD_SAFE_RECOVERY, (PX4_AUTO << 16) | (PX4_AUTO_RTL << 24), ""),
+    ModeInfo(STANDARD_MISSION, (PX4_AUTO << 16) | (PX4_AUTO_MISSION << 24), ""),
 )
 
 
@@ -84,4 +86,4 @@ def standard_mode(custom: int) -> int:
     for m in AVAILABLE_MODES:
         if m.custom == custom:
             return m.standard
-    return mav.MAV_STANDARD_MODE_NON_STANDARD
+    return STANDARD_NON_STANDARD

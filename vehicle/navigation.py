@@ -16,8 +16,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from link.parameters import default
+
+if TYPE_CHECKING:
+    from vehicle.params import Params
 
 TURN_IN_PLACE = 0.6  # rad: heading error beyond which a robot turns before it drives (returns and teleop alike)
 
@@ -27,11 +33,16 @@ class FollowerConfig:
     lookahead_min: float = 0.8
     lookahead_gain: float = 0.6  # s: lookahead grows with speed
     max_yaw_rate: float = 1.5  # rad/s
-    arrive_radius: float = 1.0  # RTL_ARRIVE_R
+    arrive_radius: float = default("RTL_ARRIVE_R")
     turn_in_place: float = TURN_IN_PLACE
     reverse_beyond: float = math.radians(100.0)  # the route lies behind: drive it backward
     forward_within: float = math.radians(80.0)  # ... until it lies ahead again (hysteresis)
     can_reverse: bool = True
+
+    @classmethod
+    def from_params(cls, params: Params) -> FollowerConfig:
+        """The follower a return drives with: the arrival radius is RTL_ARRIVE_R, the rest the robot's."""
+        return cls(arrive_radius=params["RTL_ARRIVE_R"])
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""The vehicle's parameters (DESIGN §5): current values and the .parm files it boots from and saves to.
+"""The vehicle's parameters (docs/architecture.md §5): current values and the .parm files it boots from and saves to.
 
 The table (names, defaults, ranges, meaning) and the .parm text format live in ``link/parameters.py``, where the
 ground station reaches them too; ``params/returnlink.parm`` holds the defaults a vehicle boots with (a test keeps

@@ -1,4 +1,5 @@
-"""Command retries (DESIGN §3.9): every command of the last few seconds, per sender, answered once and only once.
+"""Command retries (docs/architecture.md §3.9): every command of the last few seconds, per sender, answered once and
+only once.
 
 A ground station resends a COMMAND_LONG until it hears the COMMAND_ACK, and a radio can deliver a copy late. If
 the vehicle remembered only the last command per command id, an RTL delayed behind a newer command would look new

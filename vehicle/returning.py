@@ -1,4 +1,4 @@
-"""Return planning (DESIGN §6): where to go back to, and the route there. Pure functions of the trail.
+"""Return planning (docs/architecture.md §6): where to go back to, and the route there. Pure functions of the trail.
 
 The return target and route are recomputed from the trail at the moment a return block starts (and on a replan);
 the auto-return service then drives the route with the navigator under a sublease of its block.
@@ -179,7 +179,7 @@ def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_dis
     the last place the operator was heard stops on the fringe of coverage, not inside it.
 
     A LINK route after a loss also carries ``onward``: the trail from the target back to its start, which the
-    service follows when the target turns out to be a dead zone (DESIGN §6).
+    service follows when the target turns out to be a dead zone (docs/architecture.md §6).
     """
     if target is Target.HEADING:
         s = np.asarray(start, dtype=float)

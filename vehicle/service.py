@@ -1,4 +1,5 @@
-"""The auto-return service: executes the blocks of the return plan while their lease is current (DESIGN §6).
+"""The auto-return service: executes the blocks of the return plan while their lease is current (docs/architecture.md
+§6).
 
 The return plan is an ordinary mission: MAV_CMD_LEASE_BOUNDARY splits it into execution leases, each holding a few
 items (RETURN_TO_LINK, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH = retrace the whole trail, NAV_WAYPOINT). The service
@@ -101,7 +102,7 @@ class ServiceState:
     best_remaining: float
     last_progress_at: float
     stretch_speed: bool = False  # RTL_SPEED=0: drive each stretch at the speed it was driven outbound
-    onward: bool = False  # went on past a dead-zone target (DESIGN §6): the next arrival ends the block
+    onward: bool = False  # went on past a dead-zone target (docs/architecture.md §6): the next arrival ends the block
     reverse: bool = False  # the navigator is driving the route backward (it lay behind the robot)
 
 
@@ -180,7 +181,8 @@ def cruise(st: ServiceState) -> float:
 
 def _go_on(st: ServiceState, x: float, y: float, t: float, params: Params, link_lost: bool) -> ServiceState | None:
     """A RETURN_TO_LINK block at its target with the link still down goes on back along the trail, within its
-    displacement budget: a link-good tag is a promise the place may not keep (DESIGN §6). None: it may not."""
+    displacement budget: a link-good tag is a promise the place may not keep (docs/architecture.md §6). None: it may
+    not."""
     it = st.items[st.item]
     route = st.route
     if (it.command != NAV_RETURN_TO_LINK or not link_lost or st.onward or route is None or route.onward is None
@@ -219,7 +221,7 @@ def step(st: ServiceState, x: float, y: float, yaw: float, t: float, trail: Trai
     if st.onward and not link_lost:
         # past a dead-zone target only for want of the link: it is back (a block that continues on regain)
         return ServiceStep(st, 0.0, 0.0, ExpireReason.COMPLETED)
-    cfg = FollowerConfig(arrive_radius=params["RTL_ARRIVE_R"])
+    cfg = FollowerConfig.from_params(params)
     cmd = follow(st.path, x, y, yaw, st.progress, cruise(st), cfg, st.reverse)
     if cmd.arrived:
         onward = _go_on(replace(st, progress=cmd.progress), x, y, t, params, link_lost)

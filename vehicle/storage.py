@@ -2,10 +2,10 @@
 strictly.
 
 A robot can lose power at any instant, and a half-written parameter file that boots with defaults silently loses
-every setting the operator made (DESIGN §8). So every file is replaced by write -> fsync -> rename -> fsync of the
-directory: a reader, or the next boot, sees either the whole old file or the whole new one, never a truncated one.
-Reading is the other half: a damaged file is reported by name and line (``StoredFileError``) and the caller refuses
-to start on it rather than falling back to defaults.
+every setting the operator made (docs/architecture.md §8). So every file is replaced by write -> fsync -> rename ->
+fsync of the directory: a reader, or the next boot, sees either the whole old file or the whole new one, never a
+truncated one. Reading is the other half: a damaged file is reported by name and line (``StoredFileError``) and the
+caller refuses to start on it rather than falling back to defaults.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The breadcrumb trail: where the robot has been, by its own estimate, and whether it could hear the operator there.
 
-Why it looks like this (DESIGN §6, and what SmartRTL gets wrong):
+Why it looks like this (docs/architecture.md §6, and what SmartRTL gets wrong):
 
 * Crumbs come from the estimator, never from ground truth, so the same code runs on a real robot.
 * Simplification is online and O(1) per crumb: a *sleeve* (angular wedge) from the last kept point narrows with
@@ -24,19 +24,31 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
+
+from link.parameters import default
+
+if TYPE_CHECKING:
+    from vehicle.params import Params
 
 FOLD_SLOPE = 0.5  # a fold-back heads back within atan(0.5) (about 27 degrees) of the stretch it runs along
 
 
 @dataclass(frozen=True)
 class TrailConfig:
-    spacing: float = 0.5  # TRL_SPACING
-    tolerance: float = 0.25  # TRL_TOL
-    loop_distance: float = 1.0  # TRL_LOOP_D
-    max_points: int = 2000  # TRL_MAX_PTS
+    """The TRL_* parameters; defaults from the parameter table."""
+
+    spacing: float = default("TRL_SPACING")
+    tolerance: float = default("TRL_TOL")
+    loop_distance: float = default("TRL_LOOP_D")
+    max_points: int = int(default("TRL_MAX_PTS"))
+
+    @classmethod
+    def from_params(cls, params: Params) -> TrailConfig:
+        return cls(spacing=params["TRL_SPACING"], tolerance=params["TRL_TOL"],
+                   loop_distance=params["TRL_LOOP_D"], max_points=int(params["TRL_MAX_PTS"]))
 
 
 class Crumb(NamedTuple):

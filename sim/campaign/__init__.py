@@ -1,4 +1,4 @@
-"""Campaigns (DESIGN §9): a grid of trials run on Ray, stored as one parquet row per trial, summarised per
+"""Campaigns (docs/architecture.md §9): a grid of trials run on Ray, stored as one parquet row per trial, summarised per
 scenario x vehicle x policy and written up as a report with plots.
 
 ``spec`` reads the TOML grid, ``trial`` runs one trial (pure: inputs in, row out), ``executors`` decides where

@@ -8,6 +8,9 @@ policies = ["returnlink", "hold"]                     # default: ["returnlink"]
 timeout_s = 300                                       # wall-clock seconds per trial
 [params]                                              # a grid: every combination of these values
 LNK_TIMEOUT = [2.0, 5.0]
+[radio]                                               # the radio as an axis of the same grid (RADIO_AXES)
+power_dbm = [-20.0, 0.0, 20.0]                        # the operator station's transmit power
+exponent = [2.0, 2.5]
 ```
 
 Trials are the cartesian product. A spec is written by hand and a campaign may run for hours, so every mistake is
@@ -25,8 +28,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from sim.campaign.trial import Trial
-from sim.policies import DEFAULT_POLICY, POLICY_NAMES
+from sim.campaign.trial import RADIO_AXES, RADIO_PREFIX, Trial
+from sim.policies import DEFAULT_POLICY, FIRMWARE_VEHICLE, POLICY_NAMES, flies
 from sim.scenario import BUILTIN, ScenarioError, parse
 from vehicle.params import BY_NAME, ParamError, validate
 
@@ -35,8 +38,8 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-VEHICLES = ("rover", "legged")
-FIELDS = ("scenarios", "vehicles", "seeds", "params", "policies", "timeout_s")
+VEHICLES = ("rover", "legged", "ardurover")  # ardurover: the real ArduPilot firmware (docs/architecture.md §10)
+FIELDS = ("scenarios", "vehicles", "seeds", "params", "radio", "policies", "timeout_s")
 MAX_TRIALS = 1_000_000  # a typo such as seeds = {from = 1, to = 1e9} is refused before it fills a disk
 DEFAULT_TIMEOUT_S = 600.0
 
@@ -177,6 +180,28 @@ def _params(r: _Lines, raw: dict) -> dict[str, list[float]]:
     return grid
 
 
+def _radio(r: _Lines, raw: dict) -> dict[str, list[float]]:
+    """The ``[radio]`` grid: how strong the operator's radio is, swept like a vehicle parameter (a trial carries
+    its values among its parameters as ``radio.NAME``, so they are hashed into its id and replayed with it)."""
+    v = raw.get("radio", {})
+    if not isinstance(v, dict):
+        raise r.fail("radio", "must be a table: NAME = [values]")
+    grid: dict[str, list[float]] = {}
+    for name, values in v.items():
+        fld = f"radio.{name}"
+        if name not in RADIO_AXES:
+            raise r.fail(fld, f"unknown radio setting (known: {', '.join(RADIO_AXES)})")
+        lo, hi, _ = RADIO_AXES[name]
+        values = values if isinstance(values, list) else [values]
+        if not values:
+            raise r.fail(fld, "needs at least one value")
+        for x in values:
+            if not _number(x) or not lo <= x <= hi:
+                raise r.fail(fld, f"values must be numbers within {lo:g}..{hi:g}, got {x!r}")
+        grid[RADIO_PREFIX + name] = list(dict.fromkeys(float(x) for x in values))
+    return grid
+
+
 def parse_spec(text: str, file: str = "<spec>", spec_dir: Path | None = None) -> Spec:
     """The trials of a spec, or SpecError naming the first mistake."""
     r = _Lines(file, text)
@@ -197,11 +222,22 @@ def parse_spec(text: str, file: str = "<spec>", spec_dir: Path | None = None) ->
         if veh not in VEHICLES:
             raise r.fail(f"vehicles[{k}]", f"must be one of {', '.join(VEHICLES)}, got {veh!r}")
     seeds = _seeds(r, raw) if "seeds" in raw else None
-    grid = _params(r, raw)
+    grid = {**_params(r, raw), **_radio(r, raw)}
     policies = _strings(r, raw, "policies", [DEFAULT_POLICY])
     for k, p in enumerate(policies):
         if p not in POLICY_NAMES:
             raise r.fail(f"policies[{k}]", f"unknown policy {p!r} (known: {', '.join(POLICY_NAMES)})")
+    # the grid pairs each policy with the vehicles that can fly it (the firmware's failsafes with the firmware, the
+    # native policies with the native robots), so one spec compares both; a policy no listed vehicle flies is an
+    # error, as is a vehicle no listed policy suits
+    listed = vehicles or [parse(text_, source).vehicle for _, source, text_ in scenarios]
+    for k, p in enumerate(policies):
+        if not any(flies(p, veh) for veh in listed):
+            need = f"vehicle {FIRMWARE_VEHICLE!r}" if not flies(p, "rover") else "a native vehicle (rover, legged)"
+            raise r.fail(f"policies[{k}]", f"policy {p!r} needs {need} in vehicles")
+    for k, veh in enumerate(vehicles or []):
+        if not any(flies(p, veh) for p in policies):
+            raise r.fail(f"vehicles[{k}]", f"no listed policy can be flown by vehicle {veh!r}")
     timeout = raw.get("timeout_s", DEFAULT_TIMEOUT_S)
     if not _number(timeout) or timeout <= 0:
         raise r.fail("timeout_s", f"must be a positive number of wall-clock seconds, got {timeout!r}")
@@ -216,6 +252,8 @@ def parse_spec(text: str, file: str = "<spec>", spec_dir: Path | None = None) ->
             for seed in seeds or [own.seed]:
                 for combo in combos:
                     for policy in policies:
+                        if not flies(policy, veh):
+                            continue
                         t = Trial(name, source, text_, veh, seed, tuple(sorted(combo)), policy)
                         trials.setdefault(t.id, t)
     return Spec(file, tuple(trials.values()), float(timeout))

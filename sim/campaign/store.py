@@ -32,8 +32,9 @@ FLUSH_SHARE = 20.0  # the gap between rewrites is at least this many times what 
 INPUTS = [("trial_id", pa.string()), ("scenario", pa.string()), ("source", pa.string()),
           ("scenario_text", pa.string()), ("vehicle", pa.string()), ("seed", pa.int64()),
           ("params", pa.string()), ("policy", pa.string())]
-# every metric of DESIGN §7 (scenario, vehicle, seed and policy are the inputs above); nested ones as JSON text
-JSON_METRICS = ("lease_events", "failures", "loss_position", "rest_position", "blocks")
+# every metric of docs/architecture.md §7 (scenario, vehicle, seed and policy are the inputs above); nested ones as JSON
+# text
+JSON_METRICS = ("lease_events", "failures", "loss_position", "rest_position", "blocks", "firmware_modes")
 METRICS = [("sim_duration_s", pa.float64()), ("link_lost_s", pa.float64()), ("return_started_s", pa.float64()),
            ("reaction_latency_s", pa.float64()), ("link_regained_s", pa.float64()),
            ("distance_back_m", pa.float64()), ("max_displacement_m", pa.float64()),
@@ -43,7 +44,9 @@ METRICS = [("sim_duration_s", pa.float64()), ("link_lost_s", pa.float64()), ("re
            ("real_time_factor", pa.float64()), ("lease_events", pa.string()), ("passed", pa.bool_()),
            ("failures", pa.string()), ("loss_position", pa.string()), ("rest_position", pa.string()),
            ("rest_link_quality", pa.float64()), ("link_cycles", pa.int64()), ("regained_by", pa.string()),
-           ("collisions_during_return", pa.int64()), ("return_speed_mps", pa.float64()), ("blocks", pa.string())]
+           ("collisions_during_return", pa.int64()), ("return_speed_mps", pa.float64()), ("blocks", pa.string()),
+           # vehicle ardurover only (docs/architecture.md §10): the firmware's version and its mode timeline
+           ("firmware", pa.string()), ("firmware_modes", pa.string())]
 OUTCOME = [("status", pa.string()), ("error", pa.string()), ("cpu_s", pa.float64())]
 SCHEMA = pa.schema(INPUTS + METRICS + OUTCOME)
 FINISHED = ("ok", "failed")
@@ -129,10 +132,10 @@ class Store:
 
 
 # ----- the summary (pure) -------------------------------------------------------------------------------------
-SUMMARY_COLUMNS = ["scenario", "vehicle", "policy", "n", "ok", "failed", "errors", "pass_rate",
+SUMMARY_COLUMNS = ["scenario", "vehicle", "policy", "params", "n", "ok", "failed", "errors", "pass_rate",
                    "link_regained_rate", "time_to_link_p50_s", "time_to_link_p90_s", "time_to_link_p99_s",
                    "distance_back_m_mean", "rest_from_loss_m_mean", "rest_from_loss_m_p90",
-                   "collisions_during_return"]
+                   "collisions_during_return", "link_cycles_mean", "link_cycles_max"]
 
 
 def _json(v):
@@ -166,19 +169,23 @@ def _mean(values: list[float]) -> float | None:
 
 
 def summary(rows: Iterable[dict]) -> list[dict]:
-    """One line per scenario x vehicle x policy. Rates are over the trials that ran (errors are counted apart,
-    they say nothing about the policy); time to link counts a never-regained link as infinite."""
-    groups: dict[tuple[str, str, str], list[dict]] = {}
+    """One line per scenario x vehicle x policy x parameter values (a swept radio strength or LNK_TIMEOUT is
+    a line of its own, not averaged away; ``params`` is "" when the spec swept none). Rates are over the trials
+    that ran (errors are counted apart, they say nothing about the policy); time to link counts a never-regained
+    link as infinite; link cycles are COMMS_LOST events per run."""
+    groups: dict[tuple[str, str, str, str], list[dict]] = {}
     for r in rows:
-        groups.setdefault((r["scenario"], r["vehicle"], r["policy"]), []).append(r)
+        params = r.get("params") or ""
+        groups.setdefault((r["scenario"], r["vehicle"], r["policy"], "" if params == "{}" else params), []).append(r)
     out = []
-    for (scenario, vehicle, policy), rs in sorted(groups.items()):
+    for (scenario, vehicle, policy, params), rs in sorted(groups.items()):
         ran = [r for r in rs if r.get("status") in FINISHED]
         ttl = [x for r in ran if (x := time_to_link(r)) is not None]
         rest = [x for r in ran if (x := rest_from_loss(r)) is not None]
         coll = [r["collisions_during_return"] for r in ran if r.get("collisions_during_return") is not None]
+        cycles = [r["link_cycles"] for r in ran if r.get("link_cycles") is not None]
         out.append({
-            "scenario": scenario, "vehicle": vehicle, "policy": policy, "n": len(rs),
+            "scenario": scenario, "vehicle": vehicle, "policy": policy, "params": params, "n": len(rs),
             "ok": sum(r["status"] == "ok" for r in rs), "failed": sum(r["status"] == "failed" for r in rs),
             "errors": sum(r["status"] == "error" for r in rs),
             "pass_rate": sum(r["status"] == "ok" for r in ran) / len(ran) if ran else None,
@@ -188,6 +195,7 @@ def summary(rows: Iterable[dict]) -> list[dict]:
             "distance_back_m_mean": _mean([r["distance_back_m"] for r in ran if r.get("distance_back_m") is not None]),
             "rest_from_loss_m_mean": _mean(rest), "rest_from_loss_m_p90": _pct(rest, 90),
             "collisions_during_return": sum(coll) if coll else None,
+            "link_cycles_mean": _mean(cycles), "link_cycles_max": max(cycles) if cycles else None,
         })
     return out
 

@@ -12,9 +12,9 @@ import hashlib
 import json
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
-from sim.policies import DEFAULT_POLICY
+from sim.policies import DEFAULT_POLICY, FIRMWARE_VEHICLE
 
 
 @dataclass(frozen=True)
@@ -29,6 +29,9 @@ class Trial:
     seed: int
     params: tuple[tuple[str, float], ...] = ()
     policy: str = DEFAULT_POLICY
+    # the firmware binary for vehicle ardurover: where it lives on this machine, not what the trial is, so it is
+    # neither hashed nor stored (empty: found again by RETURNLINK_ARDUROVER or PATH where the trial runs)
+    firmware: str = field(default="", compare=False)
 
     @property
     def id(self) -> str:
@@ -44,22 +47,60 @@ def trial_id(scenario_text: str, vehicle: str, seed: int, params: dict[str, floa
     return hashlib.sha256(canon.encode("utf-8")).hexdigest()[:16]
 
 
+# The radio as a campaign axis: a sweep spec's ``[radio]`` table, carried in a trial's parameters as "radio.NAME".
+# name -> (lowest, highest, what it sets); DARPA SubT's virtual radio is exponent 2.5, 40 dB at 1 m, 10 dB spread,
+# 20 dBm transmit, -90 dBm noise floor.
+RADIO_PREFIX = "radio."
+RADIO_AXES: dict[str, tuple[float, float, str]] = {
+    "power_dbm": (-40.0, 40.0, "the operator station's transmit power (dBm)"),
+    "exponent": (1.5, 6.0, "log-distance path-loss exponent"),
+    "shadowing_db": (0.0, 20.0, "log-normal shadowing spread (dB)"),
+    "ref_loss_db": (20.0, 80.0, "path loss at 1 m (dB)"),
+    "sensitivity_dbm": (-120.0, -50.0, "receiver sensitivity: RSSI of 50 % delivery (dBm)"),
+}
+
+
+def with_radio(sc, settings: dict[str, float]):
+    """``sc`` with the radio settings of a trial: the operator station's power, the rest on the radio model."""
+    if not settings:
+        return sc
+    model = {k: v for k, v in settings.items() if k != "power_dbm"}
+    sc = replace(sc, radio=replace(sc.radio, **model)) if model else sc
+    if "power_dbm" in settings:
+        stations = tuple(replace(s, power_dbm=settings["power_dbm"]) if s.name == sc.operator_station else s
+                         for s in sc.stations)
+        sc = replace(sc, stations=stations)
+    return sc
+
+
 def scenario_of(trial: Trial):
     """The scenario this trial flies: the stored text parsed again, with the trial's parameter values on top of
-    the scenario's own."""
+    the scenario's own and its radio settings on the radio."""
     from sim.scenario import parse
 
     sc = parse(trial.scenario_text, trial.source)
-    return replace(sc, params={**sc.params, **dict(trial.params)}) if trial.params else sc
+    if not trial.params:
+        return sc
+    vehicle = {k: v for k, v in trial.params if not k.startswith(RADIO_PREFIX)}
+    radio = {k[len(RADIO_PREFIX):]: v for k, v in trial.params if k.startswith(RADIO_PREFIX)}
+    return with_radio(replace(sc, params={**sc.params, **vehicle}), radio)
 
 
 def simulate(trial: Trial, progress: bool = False):
     """Run the trial's simulation and compute its metrics: the ``Run`` (for plots) with ``run.metrics`` set."""
-    from sim import metrics
-    from sim.runner import Run
+    from sim import outputs
 
-    run = Run(scenario_of(trial), trial.vehicle, trial.seed, progress=progress, policy=trial.policy).run()
-    run.metrics = metrics.compute(run)
+    if trial.vehicle == FIRMWARE_VEHICLE:
+        from sim.firmware.locate import find_firmware
+        from sim.firmware.run import FirmwareRun
+
+        run = FirmwareRun(scenario_of(trial), trial.seed, trial.policy, find_firmware(trial.firmware or None),
+                          progress=progress).run()
+    else:
+        from sim.runner import Run
+
+        run = Run(scenario_of(trial), trial.vehicle, trial.seed, progress=progress, policy=trial.policy).run()
+    run.metrics = outputs.compute(run)
     return run
 
 

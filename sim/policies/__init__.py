@@ -1,4 +1,5 @@
-"""Link-loss policies a trial can fly (DESIGN §9): returnlink itself and the baselines it is compared against.
+"""Link-loss policies a trial can fly (docs/architecture.md §9): returnlink itself and the baselines it is compared
+against.
 
 Every policy runs on the same vehicle and simulator, so only the policy differs between paired trials: the
 lease book, its COMMS_LOST trigger, telemetry, the radio and the operator's script are the same; a baseline is a
@@ -12,13 +13,27 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # the command line reads the names without loading the vehicle
     from vehicle.app import Contingency
 
-POLICY_NAMES: tuple[str, ...] = ("returnlink", "hold", "rtl", "smartrtl", "backup")
+NATIVE_POLICIES: tuple[str, ...] = ("returnlink", "hold", "rtl", "smartrtl", "backup")
+# the real ArduPilot firmware's own failsafes (docs/architecture.md §10), flown only by vehicle ``ardurover``
+FIRMWARE_POLICIES: tuple[str, ...] = ("ardupilot-hold", "ardupilot-rtl", "ardupilot-smartrtl")
+POLICY_NAMES: tuple[str, ...] = NATIVE_POLICIES + FIRMWARE_POLICIES
 DEFAULT_POLICY = "returnlink"
+FIRMWARE_VEHICLE = "ardurover"
+DEFAULT_FIRMWARE_POLICY = "ardupilot-smartrtl"
+
+
+def flies(policy: str, vehicle: str) -> bool:
+    """Whether ``vehicle`` can fly ``policy``: the firmware's failsafes need the firmware, and the firmware has no
+    returnlink onboard to fly the native policies with."""
+    return (policy in FIRMWARE_POLICIES) == (vehicle == FIRMWARE_VEHICLE)
 
 
 def check_policy(name: str) -> str:
-    """The policy name, or ValueError listing the known ones."""
-    if name not in POLICY_NAMES:
+    """The name of a policy the native vehicle flies, or ValueError saying why not."""
+    if name in FIRMWARE_POLICIES:
+        raise ValueError(f"policy {name!r} is the ArduPilot firmware's own failsafe: fly it with vehicle "
+                         f"{FIRMWARE_VEHICLE!r}")
+    if name not in NATIVE_POLICIES:
         raise ValueError(f"unknown policy {name!r}; known: {', '.join(POLICY_NAMES)}")
     return name
 

@@ -7,7 +7,7 @@ trail (estimate frame) reversed point by point, loops included, from the current
 start; the robot stands still while the vehicle's link tag says the owner is heard well (``link_is_good``) and
 backs up again if it goes bad before the lease book declares LINK_REGAINED, which ends the block as for any
 return. It completes at the trail's start. An operator's RTL over a good link has no link to wait for: it backs
-up the whole trail, as any operator-commanded return runs to its target (DESIGN §6).
+up the whole trail, as any operator-commanded return runs to its target (docs/architecture.md §6).
 """
 
 from __future__ import annotations

@@ -36,7 +36,7 @@ class PathDriver:
         if self.path is None:
             return 0.0, 0.0, ExpireReason.COMPLETED
         cmd = follow(self.path, x, y, yaw, self.progress, self.speed,
-                     FollowerConfig(arrive_radius=vehicle.params["RTL_ARRIVE_R"]), self.reverse)
+                     FollowerConfig.from_params(vehicle.params), self.reverse)
         self.progress, self.reverse = cmd.progress, cmd.reverse
         if cmd.arrived:
             return 0.0, 0.0, ExpireReason.COMPLETED

@@ -7,6 +7,8 @@ say what the native vehicle answers, for tools and tests that enumerate it witho
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from vehicle.services.actions import VehicleActions
 from vehicle.services.base import Parts, Service, mav
 from vehicle.services.commands import CommandServer
@@ -15,21 +17,24 @@ from vehicle.services.mission import MissionService
 from vehicle.services.operator import OperatorControl
 from vehicle.services.params import ParamServer
 from vehicle.services.signing import Signing
-from vehicle.services.telemetry import Telemetry
+from vehicle.services.telemetry import DEFAULT_RATES, Telemetry
 from vehicle.services.teleop import Teleop
 
 
-def vehicle_services(p: Parts) -> list[Service]:
+def vehicle_services(p: Parts, *, rates: Mapping[int, float] = DEFAULT_RATES, drives: bool = True) -> list[Service]:
     """The native vehicle's microservices, in the order their ticks run: lease announcements, plan progress and
-    upload time-outs, the signing clock, then telemetry (which reports what the others changed)."""
+    upload time-outs, the signing clock, then telemetry (which reports what the others changed).
+
+    A companion computer composes the same list with the streams it owns (``rates``) and without the teleop
+    service (``drives`` False): its robot is the autopilot, which the operator's setpoints reach directly."""
     missions: MissionService  # (telemetry's MISSION_CURRENT counts the stored plan's items)
     telemetry = Telemetry(p.out, p.vehicle, p.origin, p.boot_t, lambda: (p.counters.frames, p.counters.bad_frames),
                           lambda: len(missions.transfer.lists[mav.MAV_MISSION_TYPE_MISSION]),
-                          mav_type=p.mav_type, autopilot=p.autopilot)
+                          mav_type=p.mav_type, autopilot=p.autopilot, rates=rates)
     missions = MissionService(p.out, p.vehicle, p.origin, telemetry.emit)
+    teleop = [Teleop(p.out, p.vehicle, p.counters, p.sysid)] if drives else []
     return [OperatorControl(p.out, p.vehicle, p.boot_t), missions, p.signing, telemetry,
-            ParamServer(p.out, p.vehicle, p.param_file), Teleop(p.out, p.vehicle, p.counters, p.sysid),
-            VehicleActions(p.out, p.vehicle), FtpRefusal(p.out)]
+            ParamServer(p.out, p.vehicle, p.param_file), *teleop, VehicleActions(p.out, p.vehicle), FtpRefusal(p.out)]
 
 
 # the service classes of the native composition, with the command server every composition has

@@ -1,0 +1,86 @@
+"""The two pictures of a firmware run, like a native run's: where the rover went (true frame, coloured by the
+firmware's mode, with the loss and rest points and the EKF's path) and what the firmware did over time (its mode
+timeline against the radio link and the distance driven back)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from sim.firmware.lockstep import MODE_NAMES
+from sim.firmware.operator import RETURN_MODES
+from sim.firmware.run import FirmwareRun
+from sim.plots import draw_world, plt, save
+
+MODE_COLOURS = {"GUIDED": "tab:green", "HOLD": "tab:orange", "RTL": "tab:red", "SMART_RTL": "tab:blue",
+                "MANUAL": "0.5"}
+
+
+def _columns(run: FirmwareRun) -> dict[str, np.ndarray]:
+    a = np.array([r[:10] for r in run.rows], dtype=float) if run.rows else np.zeros((0, 10))
+    return {"t": a[:, 0], "x": a[:, 1], "y": a[:, 2], "ex": a[:, 3], "ey": a[:, 4], "mode": a[:, 5],
+            "link": a[:, 6], "rssi": a[:, 7]}
+
+
+def trajectory(run: FirmwareRun, path: Path) -> Path:
+    c = _columns(run)
+    m = run.metrics or {}
+    fig, ax = plt.subplots(figsize=(11, 8))
+    draw_world(ax, run.world, run.scenario.bounds)
+    ax.plot(c["ey"], c["ex"], color="0.55", lw=0.8, ls="--", label="firmware EKF estimate (true frame via its origin)")
+    modes = c["mode"].astype(int)
+    for k in np.unique(modes):
+        name = MODE_NAMES.get(int(k), str(k))
+        sel = np.where(modes == k, 1.0, np.nan)
+        ax.plot(c["y"] * sel, c["x"] * sel, color=MODE_COLOURS.get(name, "k"), lw=1.6, label=f"true path, {name}")
+    for key, marker, colour, label in (("loss_position", "X", "tab:red", "link lost (last heard, true)"),
+                                       ("rest_position", "s", "tab:blue", "at rest after the failsafe (true)")):
+        p = m.get(key)
+        if p:
+            ax.plot(p[1], p[0], marker=marker, ms=12, color=colour, mfc="white" if marker == "s" else colour,
+                    zorder=9, label=label)
+    ax.set_title(f"{run.scenario.name} (ArduPilot firmware, seed {run.seed}, policy {run.policy}; true frame): "
+                 f"{'PASSED' if m.get('passed') else 'FAILED'}, back {m.get('distance_back_m')} m")
+    handles, labels = ax.get_legend_handles_labels()
+    uniq = dict(zip(labels, handles, strict=True))
+    ax.legend(uniq.values(), uniq.keys(), loc="upper left", fontsize=7)
+    return save(fig, path)
+
+
+def timeline(run: FirmwareRun, path: Path) -> Path:
+    c = _columns(run)
+    t = c["t"]
+    fig, axes = plt.subplots(3, 1, figsize=(11, 7), sharex=True, gridspec_kw={"height_ratios": [1.4, 1, 1]})
+    ax = axes[0]
+    seen = sorted({int(k) for k in c["mode"]} | {int(k) for _t, k in run.link.tap.modes})
+    levels = {k: i for i, k in enumerate(seen)}
+    ax.step(t, [levels[int(k)] for k in c["mode"]], where="post", color="tab:purple")
+    ax.set_yticks(range(len(seen)), [MODE_NAMES.get(k, str(k)) for k in seen], fontsize=8)
+    for e in (run.metrics or {}).get("firmware_modes", []):
+        ax.axvline(e["t"], color="0.8", lw=0.6)
+        ax.annotate(e["mode"], (e["t"], 0.98), xycoords=("data", "axes fraction"), fontsize=6, rotation=90,
+                    va="top", ha="right")
+    ax.set_ylabel("firmware mode")
+    ax = axes[1]
+    ax.plot(t, c["link"], color="tab:green", lw=0.8, label="packet delivery (radio)")
+    heard = np.zeros_like(t)
+    if len(t) and run.heard:
+        k = np.clip(np.round(np.array(run.heard) / (t[1] - t[0] if len(t) > 1 else 1)).astype(int) - 1, 0, len(t) - 1)
+        heard[k] = 1.0
+    ax.vlines(t[heard > 0], 0, 0.15, color="tab:green", lw=0.5, alpha=0.6, label="station heard by the firmware")
+    ax.set_ylim(-0.05, 1.05)
+    ax.set_ylabel("link")
+    ax2 = ax.twinx()
+    ax2.plot(t, c["rssi"], color="tab:red", lw=0.6, alpha=0.7)
+    ax2.set_ylabel("RSSI (dBm)", color="tab:red")
+    ax.legend(loc="lower left", fontsize=7)
+    ax = axes[2]
+    step = np.concatenate([[0.0], np.hypot(np.diff(c["x"]), np.diff(c["y"]))]) if len(t) else np.zeros(0)
+    returning = np.isin(c["mode"], tuple(RETURN_MODES))
+    ax.plot(t, np.cumsum(step * returning), color="tab:blue")
+    ax.set_ylabel("driven back (m)")
+    ax.set_xlabel("simulated time since the firmware was ready (s)")
+    fig.suptitle(f"{run.scenario.name} (ArduPilot {run.link.tap.version}, seed {run.seed}, policy {run.policy})")
+    return save(fig, path)
+

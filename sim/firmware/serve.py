@@ -1,0 +1,73 @@
+"""``returnlink sim serve SCENARIO --vehicle ardurover``: the real ArduPilot firmware in a scenario's world, in real
+time (or K times faster), for a ground station of your own.
+
+The firmware paces itself (``--speedup K``) and the bridge answers every servo packet as in a lockstep run; its
+SERIAL0 reaches 127.0.0.1:14550 and :14540 (and whoever talks to the UDP port) through the same radio proxy the
+native `sim serve` uses, so MAVProxy, MAVSDK or QGroundControl fly the firmware and feel the link die where the
+scenario says. No scripted operator: you are the operator. On exit it writes the trajectory plot.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+from link.proxy import RadioProxy
+from link.radio import Radio
+from link.transports import UdpTransport
+from sim.firmware.run import MODE_NAMES, FirmwareRun
+from sim.scenario import Scenario
+
+
+class FirmwareServer(FirmwareRun):
+    def __init__(self, scenario: Scenario, seed: int | None, policy: str, firmware: Path, port: int = 14580,
+                 peers: tuple[tuple[str, int], ...] = (("127.0.0.1", 14550), ("127.0.0.1", 14540)),
+                 perfect_link: bool = False, speedup: float = 1.0, duration: float = math.inf,
+                 log_path: Path | None = None, out=sys.stderr) -> None:
+        self.speedup = speedup  # before the firmware's link is made: it paces itself
+        super().__init__(scenario, seed, policy, firmware, duration=duration, log_path=log_path)
+        self.stations = {}  # nobody scripted: whoever connects is the ground station
+        self.transport = UdpTransport(("127.0.0.1", port), peers)
+        st = scenario.station(scenario.operator_station)
+        radio = None if perfect_link else Radio(scenario.radio, self.world.attenuation_db, self.seed + 1)
+        self.proxy = RadioProxy(self.transport, radio, (st.x, st.y), st.power_dbm, lambda: self.robot.pose[:2])
+        self.out = out
+        self._next_report = 0.0
+
+    @property
+    def address(self) -> tuple[str, int]:
+        return self.transport.address
+
+    def _boot(self) -> None:
+        print("returnlink: the firmware is booting (its EKF needs a GPS fix first)...", file=self.out, flush=True)
+        super()._boot()
+        tap = self.link.tap
+        print(f"returnlink: {tap.version} ready after {self.link.boot_s:.1f} simulated s", file=self.out, flush=True)
+
+    def _tick(self, t: float) -> None:
+        proxy = self.proxy
+        proxy.update(t)
+        for data in self.link.drain(t):
+            proxy.to_ground(data, t)
+        proxy.flush(t)
+        for data, _addr in proxy.from_ground(t):
+            self.link.send(data)
+        x, y, _ = self.robot.pose
+        st = proxy.state
+        link, rssi = (1.0, math.nan) if st is None else (st.delivery, st.rssi_dbm)
+        mode = -1 if self.link.tap.mode is None else self.link.tap.mode
+        self.rows.append((t, x, y, math.nan, math.nan, mode, link, rssi, *self.link.cmd, self.link.tap.armed,
+                          self.world.collisions))
+        if t >= self._next_report:
+            self._next_report = t + 5.0
+            quality = "perfect" if st is None else f"{st.rssi_dbm:6.1f} dBm, delivery {st.delivery:4.2f}"
+            tap = self.link.tap
+            print(f"t={t:7.1f} s  {MODE_NAMES.get(tap.mode, '?'):<10} {'armed' if tap.armed else 'disarmed'}"
+                  f"  pos ({x:6.1f}, {y:6.1f})  link {quality}", file=self.out, flush=True)
+
+    def run(self) -> FirmwareServer:
+        try:
+            return super().run()
+        finally:
+            self.transport.sock.close()

@@ -1,0 +1,41 @@
+"""What every run leaves behind, whichever vehicle flew it: metrics.json, the operator's .tlog, the trajectory and
+timeline plots, and the printed summary. A native run (``sim.runner.Run``) and a firmware run
+(``sim.firmware.run.FirmwareRun``) each have their own metrics and plots; this is the one place that picks."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def _modules(run):
+    from sim.firmware.run import FirmwareRun
+
+    if isinstance(run, FirmwareRun):
+        from sim.firmware import metrics
+
+        return metrics, "sim.firmware.report"
+    from sim import metrics
+
+    return metrics, "sim.report"
+
+
+def compute(run) -> dict:
+    return _modules(run)[0].compute(run)
+
+
+def summary(run, m: dict) -> str:
+    return _modules(run)[0].summary(run, m)
+
+
+def write(run, out: Path, plots: bool = True) -> list[Path]:
+    """metrics.json, run.tlog and (unless ``plots`` is off) trajectory.png and timeline.png in ``out``."""
+    import importlib
+
+    from sim.runner import write_metrics, write_tlog
+
+    paths = [write_metrics(run.metrics, out / "metrics.json"), write_tlog(run, out / "run.tlog")]
+    if plots:
+        # matplotlib: about 0.4 CPU-s to import, paid only when plots are drawn
+        report = importlib.import_module(_modules(run)[1])
+        paths += [report.trajectory(run, out / "trajectory.png"), report.timeline(run, out / "timeline.png")]
+    return paths

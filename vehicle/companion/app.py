@@ -1,0 +1,327 @@
+"""The companion's loop: the native vehicle (``Vehicle`` + ``Endpoint``) on an autopilot, with a router in front.
+
+Everything that decides runs the native code: the lease book, the link watch, the trail, the return service and
+navigator live in ``vehicle.app.Vehicle``; component 191 is ``vehicle.endpoint.Endpoint`` composing the native
+microservices (``vehicle.services``) with the companion's identity, the streams it owns and no teleop (``SERVICES``).
+What is added is only what sits between two links: ``router`` decides what of the ground's traffic the autopilot
+may hear, ``AutopilotDriver`` turns the autopilot into the vehicle's robot, and ``GroundVoice`` relays the
+autopilot to the ground. No clock and no socket: bytes come in through ``from_autopilot`` / ``from_ground``,
+go out through the two callables given, and ``tick(t)`` runs the 50 Hz loop at the time it is given, so the same
+object runs under ``returnlink companion`` (wall clock, real links) and in a lockstep simulation.
+
+The vehicle boots once the autopilot has said where it is (its EKF reports a horizontal position), on that pose,
+so the trail never starts at a made-up origin. Until then reads pass and state changes are answered
+TEMPORARILY_REJECTED.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Hashable
+from functools import partial
+from pathlib import Path
+
+from pymavlink.dialects.v20 import ardupilotmega as apm
+
+from link.mission import Origin
+from link.signing import Key, Streams, sim_stamp
+from link.signing import Verdict as SignVerdict
+from vehicle.app import Vehicle
+from vehicle.companion import router
+from vehicle.companion.autopilot import AutopilotDriver, is_autopilot_heartbeat, rover_problem
+from vehicle.companion.router import COMPANION_COMPID, Access, Decision, Dest, Kind
+from vehicle.companion.voice import GroundVoice, frame_msgid
+from vehicle.endpoint import Endpoint
+from vehicle.keystore import KeyStore, boot_stamp
+from vehicle.lease import ExpireReason
+from vehicle.params import Params
+from vehicle.services.native import vehicle_services
+from vehicle.services.telemetry import DEFAULT_RATES
+
+NOTICE_GAP = 2.0  # s between STATUSTEXTs about the same refused stream from the same sender
+# the endpoint's own reports of what the autopilot reports for the same system: the autopilot's copy reaches the
+# ground already, and ground stations keep one value per message type and system, so a second copy from component
+# 191 would make their position, health, mode and mission progress flicker between the two (the return's progress
+# is in LEASE_STATUS)
+DUPLICATES = frozenset((apm.MAVLINK_MSG_ID_SYS_STATUS, apm.MAVLINK_MSG_ID_GPS_RAW_INT, apm.MAVLINK_MSG_ID_ATTITUDE,
+                        apm.MAVLINK_MSG_ID_LOCAL_POSITION_NED, apm.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
+                        apm.MAVLINK_MSG_ID_HOME_POSITION, apm.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
+                        apm.MAVLINK_MSG_ID_MISSION_CURRENT, apm.MAVLINK_MSG_ID_MISSION_ITEM_REACHED,
+                        436))  # CURRENT_MODE (development.xml)
+
+# component 191's microservices: the native vehicle's, streaming only what the autopilot does not report itself
+# (lease and control status), and without teleop: setpoints are the autopilot's business (component 1)
+OWN_STREAMS = {msgid: interval for msgid, interval in DEFAULT_RATES.items() if msgid not in DUPLICATES}
+SERVICES = partial(vehicle_services, rates=OWN_STREAMS, drives=False)
+
+class Companion:
+    """returnlink beside an ArduPilot Rover. Build it, feed it bytes, tick it at 50 Hz (see the module docstring)."""
+
+    def __init__(self, params: Params, to_autopilot: Callable[[bytes], None], to_ground: Callable[[bytes], None],
+                 *, key: Key | None = None, keystore: KeyStore | None = None,
+                 stamp: Callable[[float], int] = sim_stamp, boot_epoch: int | None = None, seed: int = 0,
+                 param_file: Path | None = None, on_epoch: Callable[[int], str | None] | None = None,
+                 autopilot_name: str = "the autopilot", pivots: bool = False) -> None:
+        """``params``: the companion's returnlink parameters. ``key`` (or ``keystore``, which also keeps the signing
+        timestamp on disk) signs the ground side (docs/architecture.md §4.1), ``stamp(t)`` is its clock.
+        ``boot_epoch`` None derives the first epoch from ``seed`` (lockstep simulation only); ``on_epoch`` is told of
+        each epoch issued (``vehicle.epochs.EpochLog.issued``). ``autopilot_name`` names the autopilot link in
+        messages."""
+        self.params = params
+        self.to_autopilot, self.to_ground = to_autopilot, to_ground
+        self.keystore = keystore
+        self.key = keystore.key if keystore is not None else key
+        self.stamp = stamp
+        self.boot_epoch, self.seed = boot_epoch, seed
+        self.param_file, self.on_epoch = param_file, on_epoch
+        self.autopilot_name = autopilot_name
+        self.driver = AutopilotDriver(to_autopilot, pivots)
+        self.vehicle: Vehicle | None = None
+        self.endpoint: Endpoint | None = None
+        saved = keystore.saved_stamp if keystore is not None else None
+        self.voice = GroundVoice(self.key, stamp, boot_stamp(saved, stamp(0.0)))
+        self.ap_parser = apm.MAVLink(None, 0, 0)
+        self.ap_parser.robust_parsing = True
+        self.ground_parser = apm.MAVLink(None, 0, 0)
+        self.ground_parser.robust_parsing = True
+        self.streams = Streams()
+        self.t = 0.0
+        self.identity_problem: str | None = None  # the autopilot is not an ArduPilot Rover
+        self.autopilot_lost = False
+        self.healthy = True
+        self.mode_from_ground = False  # a ground station changed the autopilot's mode during this engagement
+        self.preempted = False
+        self.sources: dict[int, Hashable] = {}  # ground sysid -> where its last trusted frame came from
+        self.notice_at: dict[tuple[int, str], float] = {}
+        self.counters = {"forwarded": 0, "refused": 0, "relayed": 0, "bad_frames": 0}
+
+    # ----- input -----------------------------------------------------------------------------------------------
+    def from_autopilot(self, data: bytes, t: float) -> None:
+        """Bytes from the autopilot's link: observed, and relayed to the ground (all but answers addressed to the
+        companion itself)."""
+        try:
+            msgs = self.ap_parser.parse_buffer(data) or []
+        except Exception:  # noqa: BLE001 - a garbled stream must not stop the companion
+            self.counters["bad_frames"] += 1
+            self.ap_parser = apm.MAVLink(None, 0, 0)
+            self.ap_parser.robust_parsing = True
+            return
+        d = self.driver
+        for m in msgs:
+            if m.get_type() == "BAD_DATA":
+                self.counters["bad_frames"] += 1
+                continue
+            d.observe(m, t)
+            if d.seen.sysid is not None and self.identity_problem is None and is_autopilot_heartbeat(m) \
+                    and m.get_srcSystem() == d.seen.sysid:
+                self.identity_problem = rover_problem(m)
+            if self._for_companion(m):
+                continue
+            self.to_ground(self.voice.relay(m))
+            self.counters["relayed"] += 1
+
+    def _for_companion(self, m) -> bool:
+        fields = m.get_fieldnames()
+        return ("target_system" in fields and "target_component" in fields
+                and m.target_system == self.driver.seen.sysid and m.target_component == COMPANION_COMPID)
+
+    def from_ground(self, data: bytes, t: float, source: Hashable | None = None) -> None:
+        """Bytes from the ground side (``source``: where they came from, e.g. a UDP address): each frame to the
+        companion's endpoint, to the autopilot, or refused and answered."""
+        try:
+            msgs = self.ground_parser.parse_buffer(data) or []
+        except Exception:  # noqa: BLE001 - a hostile byte stream must never take the companion down
+            self.counters["bad_frames"] += 1
+            self.ground_parser = apm.MAVLink(None, 0, 0)
+            self.ground_parser.robust_parsing = True
+            return
+        for m in msgs:
+            try:
+                self._ground_frame(m, t, source)
+            except Exception as e:  # noqa: BLE001 - one absurd frame is refused, never fatal
+                self.counters["bad_frames"] += 1
+                self.notice(0, "fault", f"ground frame {m.get_type()} dropped: {type(e).__name__}: {e}", t)
+
+    def _ground_frame(self, m, t: float, source: Hashable | None) -> None:
+        if m.get_type() == "BAD_DATA":
+            self.counters["bad_frames"] += 1
+            return
+        header = m.get_header()
+        sender, scomp = header.srcSystem, header.srcComponent
+        sysid = self.driver.seen.sysid
+        if sender == 0 or sysid is None or sender == sysid:
+            return  # anonymous, before the autopilot is known, or the vehicle's own frames come back
+        raw = bytes(m.get_msgbuf())
+        trusted = True
+        if self.key is not None:
+            self.streams, verdict = self.streams.verify(self.key, raw, self.voice.enc.signing.timestamp)
+            trusted = verdict is SignVerdict.ACCEPT
+        if trusted and source is not None:
+            self.sources[sender] = source
+        r = router.route(m, sysid)
+        v, ep = self.vehicle, self.endpoint
+        if r.dest in (Dest.COMPANION, Dest.KEEP):
+            if ep is not None:
+                ep.receive(raw, t, source)  # the endpoint judges signatures and hears the owner itself
+            elif r.dest is Dest.COMPANION:
+                self.notice(sender, "starting", "returnlink companion is starting: waiting for the autopilot's "
+                             "position estimate", t)
+            return
+        if trusted and v is not None:
+            v.heard(sender, t, header.seq)
+        if r.dest is Dest.MISDIRECTED:
+            self._refuse(m, Decision(Kind.REFUSE, apm.MAV_RESULT_DENIED, f"{router.what(m)} moves the robot: send "
+                                     f"it to the autopilot (component 1), not to the companion (191)"), sender, scomp,
+                         t)
+            return
+        if r.dest is Dest.SIGNING:
+            self.notice(sender, "signing", "signing setup refused: the companion's key is changed by restarting "
+                         "it with --key FILE", t)
+            return
+        if r.dest is not Dest.AUTOPILOT:
+            return
+        d = self._decide(m, r.access, sender, scomp, t, trusted)
+        if d.kind is Kind.FORWARD:
+            self.to_autopilot(raw)
+            self.counters["forwarded"] += 1
+            if r.access is Access.MODE:
+                self.mode_from_ground = True
+            return
+        self._refuse(m, d, sender, scomp, t)
+
+    def _decide(self, m, access: Access, sender: int, scomp: int, t: float, trusted: bool) -> Decision:
+        """The router's decision, with the vehicle asked where the native endpoint asks it (admit, take_manual)."""
+        if access is Access.READ:
+            return router.FORWARD
+        v = self.vehicle
+        if v is None:
+            return Decision(Kind.REFUSE, apm.MAV_RESULT_TEMPORARILY_REJECTED,
+                            "the companion is starting (waiting for the autopilot's position estimate)")
+        if self.autopilot_lost:
+            return Decision(Kind.REFUSE, apm.MAV_RESULT_TEMPORARILY_REJECTED,
+                            f"{self.autopilot_name} is not answering")
+        keyed = self.key is not None
+        d = router.decide(access, sender, scomp, v.book, t, trusted=trusted, keyed=keyed)
+        if d.kind is Kind.ADMIT:
+            v.admit(sender, scomp, t)
+            d = router.decide(access, sender, scomp, v.book, t, trusted=trusted, keyed=keyed)
+            if d.kind is Kind.ADMIT:  # (cannot happen: the grant was just decided possible)
+                d = Decision(Kind.REFUSE, apm.MAV_RESULT_DENIED, "not granted")
+        if d.kind is Kind.TAKE:
+            chk = v.take_manual(sender, scomp, t)
+            if chk.executes:
+                return router.FORWARD
+            reason = chk.reason or router.RejectReason.INVALID
+            return Decision(Kind.REFUSE, router.REJECT_RESULT[reason],
+                            f"{chk.detail or reason.value}; {router.lease_text(v.book)}")
+        if d.kind is Kind.REFUSE and self.vehicle is not None:
+            self.vehicle.commands_rejected += 1  # (take_manual counts its own refusals)
+        return d
+
+    def _refuse(self, m, d: Decision, sender: int, scomp: int, t: float) -> None:
+        self.counters["refused"] += 1
+        sysid = self.driver.seen.sysid
+        assert sysid is not None
+        replies = router.answers(m, sender, scomp, d.result)
+        for comp, msg in replies.to_ground:
+            self.to_ground(self.voice.say(sysid, comp, msg))
+        for msg in replies.to_autopilot:
+            self.driver.send_message(msg)
+        what = router.what(m)
+        self.notice(sender, what, f"{what} from {sender} refused: {d.why}", t)
+
+    def notice(self, sender: int, topic: str, text: str, t: float) -> None:
+        """A STATUSTEXT to the ground, at most every NOTICE_GAP s per sender and topic (streams are refused at
+        10 Hz): through the endpoint once it runs, in the companion's name before."""
+        key = (sender, topic)
+        if t - self.notice_at.get(key, -math.inf) < NOTICE_GAP:
+            return
+        self.notice_at[key] = t
+        if self.vehicle is not None:
+            self.vehicle.notices.append(text)
+        elif self.driver.seen.sysid is not None:
+            msg = apm.MAVLink_statustext_message(apm.MAV_SEVERITY_WARNING, text.encode()[:50])
+            self.to_ground(self.voice.say(self.driver.seen.sysid, COMPANION_COMPID, msg))
+
+    # ----- the loop ------------------------------------------------------------------------------------------
+    def tick(self, t: float) -> None:
+        """One 50 Hz tick at time ``t``: the autopilot's health, the vehicle (booted once it can be), the return's
+        hold on the autopilot, the keepalive, and the endpoint's frames to the ground."""
+        self.t = t
+        self.voice.tick(t)
+        d = self.driver
+        self._watch_autopilot(t)
+        if self.vehicle is None and d.ready() and self.identity_problem is None:
+            self._boot(t)
+        self.healthy = self._tick_vehicle(t) if self.vehicle is not None else True
+        why = d.tick(t, self.healthy)
+        if why is not None and self.vehicle is not None:
+            self.preempted = True
+            self.vehicle.preempt(t, ExpireReason.OPERATOR_EXPIRE, why)
+        if self.endpoint is not None:
+            for frame in self.endpoint.tick(t):
+                if frame_msgid(frame) not in DUPLICATES:
+                    self.to_ground(frame)
+
+    def _boot(self, t: float) -> None:
+        d = self.driver
+        origin = Origin(*d.seen.origin) if d.seen.origin is not None else Origin()
+        v = Vehicle(d, self.params, d.pose(), t, seed=self.seed, boot_epoch=self.boot_epoch)
+        v.on_epoch = self.on_epoch
+        ep = Endpoint(v, sysid=d.seen.sysid or 1, compid=COMPANION_COMPID, origin=origin, boot_t=t,
+                      param_file=self.param_file, key=None if self.keystore else self.key, keystore=self.keystore,
+                      stamp=self.stamp, services=SERVICES, mav_type=apm.MAV_TYPE_ONBOARD_CONTROLLER,
+                      autopilot=apm.MAV_AUTOPILOT_INVALID)
+        self.vehicle, self.endpoint = v, ep
+        x, y, yaw = d.pose()
+        v.notices.append(f"returnlink companion on {self.autopilot_name}: vehicle at ({x:.1f}, {y:.1f}) m, "
+                         f"heading {math.degrees(yaw) % 360:.0f} deg")
+
+    def _tick_vehicle(self, t: float) -> bool:
+        """The vehicle's own tick, then the return's hold on the autopilot. False: the tick failed (reported,
+        and the keepalive withheld so the autopilot's failsafe takes over if it keeps failing)."""
+        v, d = self.vehicle, self.driver
+        assert v is not None
+        v.armed = d.armed
+        try:
+            v.tick(t)
+        except Exception as e:  # noqa: BLE001 - reported and withheld from the keepalive, never fatal
+            self.notice(0, "tick", f"companion loop fault: {type(e).__name__}: {e}; keepalive withheld", t)
+            return False
+        returning = v.book.returning and not self.autopilot_lost
+        if returning and not d.engaged and d.armed:
+            self.mode_from_ground = self.preempted = False
+            d.engage(t)
+        elif not returning and d.engaged:
+            d.release(t, hold=not (self.mode_from_ground or self.preempted))
+        return True
+
+    def _watch_autopilot(self, t: float) -> None:
+        """The autopilot silent for LOST_AFTER: said to the ground, and whatever lease was current ends (nothing
+        it allowed can reach the robot); heard again: said too."""
+        d = self.driver
+        lost = d.seen.heard is not None and d.lost(t)
+        if lost == self.autopilot_lost:
+            return
+        self.autopilot_lost = lost
+        if lost:
+            why = f"{self.autopilot_name} lost: no message for {t - (d.seen.heard or t):.1f} s; retrying"
+            if d.engaged:
+                d.release(t, hold=False)
+            if self.vehicle is None or not self.vehicle.preempt(t, ExpireReason.STUCK, why):
+                self.notice(0, "autopilot lost", why, t)
+        else:
+            self.notice(0, "autopilot back", f"{self.autopilot_name} answering again", t)
+
+    # ----- for the shell -----------------------------------------------------------------------------------------
+    def pinned(self) -> list[Hashable]:
+        """Ground addresses a transport must keep: the owner's (docs/architecture.md §3.9)."""
+        v = self.vehicle
+        if v is None or v.book.owner is None or v.book.owner not in self.sources:
+            return []
+        return [self.sources[v.book.owner]]
+
+    def close(self) -> None:
+        """Shutdown: the signing timestamp to disk."""
+        if self.endpoint is not None:
+            self.endpoint.close(self.t)

@@ -1,0 +1,358 @@
+"""An ArduPilot Rover as the robot: a ``RobotDriver`` over MAVLink instead of wheels and sensors
+(docs/architecture.md §11).
+
+Readings come from the autopilot's own filtered estimate: LOCAL_POSITION_NED (asked for at 10 Hz with
+MAV_CMD_SET_MESSAGE_INTERVAL) as the position fix, ATTITUDE as heading and yaw rate, GPS_RAW_INT and
+EKF_STATUS_REPORT for how far to trust it. The vehicle's estimator fuses them exactly as it fuses a robot's
+sensors, so the trail and the return see one pose whatever the robot is.
+
+Commands reach the autopilot only while a return holds the lease (``engage``): the companion switches it to
+GUIDED and streams SET_POSITION_TARGET_LOCAL_NED velocity and turn-rate targets at 10 Hz. Rover stops a velocity
+target 3 s after the last one, which makes the stream a dead-man: a companion that dies mid-return leaves a rover
+that stops. Position targets never time out, so none is ever sent. On ``release`` it switches to HOLD, unless
+someone else already chose a mode. While engaged, a mode change it did not ask for (the pilot's RC switch, the
+autopilot's own failsafe, a ground station) is reported by ``tick``: the return ends rather than fight the pilot.
+
+The backstop: a HEARTBEAT from a ground-station system id (the autopilot's MAV_GCS_SYSID, read from it) at 1 Hz,
+sent only by a loop that ticks and is healthy. Ground stations' own heartbeats never reach the autopilot, so a
+dead or hung companion ends in the autopilot's GCS failsafe (FS_GCS_ENABLE, FS_ACTION).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from pymavlink.dialects.v20 import ardupilotmega as apm
+
+from vehicle.io import Fix, Readings
+
+# ArduPilot Rover's mode numbers (Rover/mode.h)
+ROVER_MODES = {0: "MANUAL", 1: "ACRO", 3: "STEERING", 4: "HOLD", 5: "LOITER", 6: "FOLLOW", 7: "SIMPLE", 8: "DOCK",
+               9: "CIRCLE", 10: "AUTO", 11: "RTL", 12: "SMART_RTL", 15: "GUIDED", 16: "INITIALISING"}
+GUIDED, HOLD = 15, 4
+ROVER_TYPES = (apm.MAV_TYPE_GROUND_ROVER, apm.MAV_TYPE_SURFACE_BOAT)  # the Rover firmware drives both
+
+COMPANION_COMPID = apm.MAV_COMP_ID_ONBOARD_COMPUTER
+TARGET_PERIOD = 0.1  # s between velocity targets (the autopilot drops a stream silent for 3 s)
+KEEPALIVE_PERIOD = 1.0  # s between backstop heartbeats
+MODE_RETRY = 1.0  # s before a mode request not yet seen in the heartbeat is sent again
+MODE_TRIES = 4  # ... and how often, before the return gives up on the autopilot
+LOST_AFTER = 3.0  # s of silence from the autopilot before it counts as lost
+STALE = 0.5  # s: an estimate older than this is not used for speed or yaw rate
+STREAMS = {  # message id -> interval (µs) the companion needs
+    apm.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 100_000,
+    apm.MAVLINK_MSG_ID_ATTITUDE: 100_000,
+    apm.MAVLINK_MSG_ID_GPS_RAW_INT: 500_000,
+    apm.MAVLINK_MSG_ID_EKF_STATUS_REPORT: 500_000,
+}
+STREAM_CHECK = 5.0  # s between checks that the position stream still runs at its rate
+GCS_SYSID_PARAMS = ("MAV_GCS_SYSID", "SYSID_MYGCS")  # ArduPilot 4.7+, and before
+CREEP = 0.3  # m/s: a rover that steers like a car turns "in place" by creeping, or it never turns at all
+EKF_POS_HORIZ_REL, EKF_POS_HORIZ_ABS = 8, 16
+
+
+def rover_problem(m) -> str | None:
+    """Why the autopilot whose HEARTBEAT is ``m`` cannot be driven by the companion, or None if it can."""
+    if m.autopilot != apm.MAV_AUTOPILOT_ARDUPILOTMEGA:
+        entry = apm.enums["MAV_AUTOPILOT"].get(m.autopilot)
+        name = entry.name.removeprefix("MAV_AUTOPILOT_") if entry else str(m.autopilot)
+        return f"the autopilot is {name}, not ArduPilot"
+    if m.type not in ROVER_TYPES:
+        entry = apm.enums["MAV_TYPE"].get(m.type)
+        name = entry.name.removeprefix("MAV_TYPE_") if entry else str(m.type)
+        return f"the autopilot is ArduPilot for a {name}, not ArduPilot Rover"
+    return None
+
+
+def is_autopilot_heartbeat(m) -> bool:
+    return m.get_type() == "HEARTBEAT" and m.autopilot != apm.MAV_AUTOPILOT_INVALID
+
+
+@dataclass
+class Observed:
+    """What the companion knows of the autopilot, from its own messages."""
+
+    sysid: int | None = None
+    compid: int = 1
+    mav_type: int | None = None
+    autopilot: int | None = None
+    mode: int | None = None
+    armed: bool = False
+    heard: float | None = None  # when the autopilot's last frame arrived
+    position: tuple[float, float, float, float, float] | None = None  # (t, x, y, vx, vy)
+    attitude: tuple[float, float, float] | None = None  # (t, yaw, yaw rate)
+    fix_type: int = 0
+    h_acc: float | None = None  # m, from GPS_RAW_INT
+    eph: float | None = None  # HDOP
+    ekf_flags: int | None = None
+    origin: tuple[float, float, float] | None = None  # (lat, lon, alt) of the EKF origin
+    params: dict[str, float] = field(default_factory=dict)
+    param_types: dict[str, int] = field(default_factory=dict)
+    position_times: list[float] = field(default_factory=list)  # arrivals of LOCAL_POSITION_NED, recent ones
+
+    def position_valid(self) -> bool:
+        """Whether LOCAL_POSITION_NED means anything yet: the EKF reports a horizontal position (absolute once a
+        GPS has a fix; relative will do on a rover without one). Before it, ArduPilot reports zeros."""
+        if self.position is None:
+            return False
+        flags = self.ekf_flags
+        if flags is None:
+            return True
+        if flags & EKF_POS_HORIZ_ABS:
+            return True
+        return bool(flags & EKF_POS_HORIZ_REL) and self.fix_type < 3
+
+    def position_std(self) -> float:
+        """1-sigma horizontal error of a fix: the receiver's own accuracy, else a guess from HDOP."""
+        if self.h_acc:
+            return min(20.0, max(0.05, self.h_acc))
+        if self.eph:
+            return min(20.0, max(0.1, 1.5 * self.eph))
+        return 1.0
+
+    def rate(self, t: float) -> float:
+        """LOCAL_POSITION_NED per second over the last 2 s."""
+        recent = [x for x in self.position_times if x > t - 2.0]
+        self.position_times[:] = recent
+        return len(recent) / 2.0
+
+
+class AutopilotDriver:
+    """The ``RobotDriver`` over MAVLink (see the module docstring). Frames for the autopilot go to ``send``."""
+
+    mav_type = apm.MAV_TYPE_ONBOARD_CONTROLLER  # the companion's own HEARTBEAT (docs/architecture.md §11)
+
+    def __init__(self, send: Callable[[bytes], None], pivots: bool = False) -> None:
+        """``pivots``: the rover turns on the spot (skid steering); otherwise a turn in place creeps."""
+        self.send = send
+        self.pivots = pivots
+        self.seen = Observed()
+        self.enc: apm.MAVLink | None = None  # as (the autopilot's sysid, 191), once that sysid is known
+        self.keepalive_enc = apm.MAVLink(None, 255, COMPANION_COMPID)
+        self.command_out = (0.0, 0.0)
+        self.direction = 1.0  # the sign of the last speed driven: a creeping turn keeps going that way
+        self.engaged = False
+        self.confirmed = False  # GUIDED seen (or acknowledged) since engaging
+        self.mode_at_engage: int | None = None
+        self.wanted: int | None = None  # a mode asked for and not yet seen
+        self.asked_at = -math.inf
+        self.tries = 0
+        self.refused: str | None = None  # the autopilot's answer to a mode request it refused
+        self.next_target = -math.inf
+        self.next_keepalive = -math.inf
+        self.next_stream_check = -math.inf
+        self.streams_asked = False
+        self.last_position_read: float | None = None
+        self.last_attitude_read: float | None = None
+        self.keepalives = 0  # sent, for the record
+
+    # ----- what the autopilot says ---------------------------------------------------------------------------
+    def observe(self, m, t: float) -> None:
+        """One message from the autopilot side (any component; only the autopilot's own are believed)."""
+        s = self.seen
+        kind = m.get_type()
+        if kind == "BAD_DATA":
+            return
+        if is_autopilot_heartbeat(m):
+            if s.sysid is None:
+                s.sysid, s.compid = m.get_srcSystem(), m.get_srcComponent()
+                self.enc = apm.MAVLink(None, s.sysid, COMPANION_COMPID)
+            if (m.get_srcSystem(), m.get_srcComponent()) == (s.sysid, s.compid):
+                s.mav_type, s.autopilot = m.type, m.autopilot
+                s.mode, s.armed = m.custom_mode, bool(m.base_mode & apm.MAV_MODE_FLAG_SAFETY_ARMED)
+        if s.sysid is None or m.get_srcSystem() != s.sysid or m.get_srcComponent() != s.compid:
+            return
+        s.heard = t
+        if kind == "LOCAL_POSITION_NED":
+            s.position = (t, m.x, m.y, m.vx, m.vy)
+            s.position_times.append(t)
+        elif kind == "ATTITUDE":
+            s.attitude = (t, m.yaw, m.yawspeed)
+        elif kind == "GPS_RAW_INT":
+            s.fix_type = m.fix_type
+            s.eph = m.eph / 100 if m.eph != 65535 else None
+            h_acc = getattr(m, "h_acc", 0)
+            s.h_acc = h_acc / 1000 if h_acc else None
+        elif kind == "EKF_STATUS_REPORT":
+            s.ekf_flags = m.flags
+        elif kind == "GPS_GLOBAL_ORIGIN":
+            s.origin = (m.latitude / 1e7, m.longitude / 1e7, m.altitude / 1000)
+        elif kind == "PARAM_VALUE":
+            name = _param_name(m.param_id)
+            s.params[name], s.param_types[name] = float(m.param_value), m.param_type
+        elif kind == "COMMAND_ACK" and m.command == apm.MAV_CMD_DO_SET_MODE and self._for_me(m):
+            if m.result == apm.MAV_RESULT_ACCEPTED and self.wanted is not None:
+                s.mode = self.wanted  # set before the answer left: the next heartbeat will show it
+            elif m.result not in (apm.MAV_RESULT_ACCEPTED, apm.MAV_RESULT_IN_PROGRESS) and self.wanted is not None:
+                entry = apm.enums["MAV_RESULT"].get(m.result)
+                self.refused = (f"the autopilot refused {mode_name(self.wanted)} "
+                                f"({entry.name.removeprefix('MAV_RESULT_') if entry else m.result})")
+
+    def _for_me(self, m) -> bool:
+        return m.target_system in (0, self.seen.sysid) and m.target_component in (0, COMPANION_COMPID)
+
+    @property
+    def armed(self) -> bool:
+        return self.seen.armed
+
+    def lost(self, t: float) -> bool:
+        return self.seen.heard is None or t - self.seen.heard > LOST_AFTER
+
+    def ready(self) -> bool:
+        """The autopilot has said who it is and where it is: the vehicle can boot on its estimate."""
+        s = self.seen
+        return s.sysid is not None and s.attitude is not None and s.position_valid()
+
+    def pose(self) -> tuple[float, float, float]:
+        s = self.seen
+        assert s.position is not None and s.attitude is not None
+        return s.position[1], s.position[2], s.attitude[1]
+
+    # ----- RobotDriver -----------------------------------------------------------------------------------------
+    def read(self, t: float, dt: float) -> Readings:
+        """This tick's readings: each new estimate once, as a fix or a heading; speed and yaw rate from the
+        freshest one (zero once it is stale: a lost autopilot must not be dead-reckoned onward)."""
+        s = self.seen
+        fix = heading = None
+        speed = yaw_rate = 0.0
+        att = s.attitude
+        if att is not None and t - att[0] <= STALE:
+            yaw_rate = att[2]
+            if att[0] != self.last_attitude_read:
+                heading, self.last_attitude_read = att[1], att[0]
+        pos = s.position
+        if pos is not None and t - pos[0] <= STALE and s.position_valid():
+            yaw = att[1] if att is not None else 0.0
+            speed = pos[3] * math.cos(yaw) + pos[4] * math.sin(yaw)
+            if pos[0] != self.last_position_read:
+                fix, self.last_position_read = Fix(pos[1], pos[2], s.position_std()), pos[0]
+        return Readings(t, speed, yaw_rate, fix, heading, 0.02)
+
+    def command(self, speed: float, yaw_rate: float) -> None:
+        """The vehicle's command this tick; it reaches the autopilot only while engaged (see ``tick``)."""
+        self.command_out = (speed, yaw_rate)
+        if abs(speed) > 0.05:
+            self.direction = math.copysign(1.0, speed)
+
+    # ----- the return's hands on the autopilot -----------------------------------------------------------------
+    def engage(self, t: float) -> None:
+        """A return holds the lease (and the autopilot is armed: a disarmed rover's mode is its pilot's): GUIDED,
+        then targets."""
+        self.engaged, self.refused = True, None
+        self.mode_at_engage = self.seen.mode
+        self.confirmed = self.seen.mode == GUIDED
+        if not self.confirmed:
+            self._ask(GUIDED, t)
+
+    def release(self, t: float, hold: bool) -> None:
+        """The return no longer holds the lease: no more targets; HOLD if ``hold`` and the autopilot is still in
+        the mode the companion put it in (a mode someone else chose is theirs)."""
+        self.engaged = False
+        self.wanted = None
+        if hold and self.seen.mode == GUIDED:
+            self._ask(HOLD, t)
+
+    def _ask(self, mode: int, t: float) -> None:
+        self.wanted, self.tries, self.refused = mode, 0, None
+        self._request_mode(t)
+
+    def _request_mode(self, t: float) -> None:
+        if self.enc is None or self.wanted is None:
+            return
+        self.asked_at, self.tries = t, self.tries + 1
+        self.send_message(self.enc.command_long_encode(self.seen.sysid, self.seen.compid, apm.MAV_CMD_DO_SET_MODE, 0,
+                                                apm.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, self.wanted, 0, 0, 0, 0, 0))
+
+    def tick(self, t: float, healthy: bool) -> str | None:
+        """Send what is due (keepalive, stream requests, mode requests, targets) and say why the return lost the
+        autopilot, if it did this tick (None: it did not)."""
+        if self.enc is None or self.lost(t):
+            return None
+        if healthy and t >= self.next_keepalive:
+            self.next_keepalive = t + KEEPALIVE_PERIOD
+            self._keepalive()
+        if t >= self.next_stream_check:
+            self._check_streams(t)
+        s = self.seen
+        if self.wanted is not None:
+            if s.mode == self.wanted:
+                self.wanted = None
+            elif self.refused is not None or (t - self.asked_at >= MODE_RETRY and self.tries >= MODE_TRIES):
+                why = self.refused or f"the autopilot did not switch to {mode_name(self.wanted)}"
+                self.wanted = None
+                if self.engaged:
+                    return why
+            elif t - self.asked_at >= MODE_RETRY:
+                self._request_mode(t)
+        if not self.engaged:
+            return None
+        if not s.armed:
+            return "the autopilot was disarmed, not by the companion: return ended"
+        if s.mode == GUIDED:
+            self.confirmed = True
+        elif s.mode is not None and (self.confirmed or s.mode != self.mode_at_engage):
+            return f"the autopilot switched to {mode_name(s.mode)}, not by the companion: return ended"
+        if s.mode == GUIDED and t >= self.next_target:
+            self.next_target = t + TARGET_PERIOD
+            self._target()
+        return None
+
+    def _target(self) -> None:
+        """One velocity + turn-rate target in the body frame (position, acceleration and yaw ignored)."""
+        assert self.enc is not None
+        speed, yaw_rate = self.command_out
+        if not self.pivots and abs(speed) < 0.05 and abs(yaw_rate) > 0.05:
+            speed = CREEP * self.direction
+        mask = 0b0000_0101_1100_0111  # ignore x y z, ax ay az, yaw: use vx vy vz and yaw rate
+        self.send_message(self.enc.set_position_target_local_ned_encode(
+            0, self.seen.sysid, self.seen.compid, apm.MAV_FRAME_BODY_NED, mask, 0, 0, 0, speed, 0, 0, 0, 0, 0, 0,
+            yaw_rate))
+
+    def _keepalive(self) -> None:
+        s = self.seen
+        gcs = next((int(s.params[p]) for p in GCS_SYSID_PARAMS if p in s.params), 255)
+        if not 1 <= gcs <= 255:
+            gcs = 255
+        self.keepalive_enc.srcSystem = gcs
+        self.send_message(self.keepalive_enc.heartbeat_encode(apm.MAV_TYPE_GCS, apm.MAV_AUTOPILOT_INVALID, 0, 0,
+                                                       apm.MAV_STATE_ACTIVE), self.keepalive_enc)
+        self.keepalives += 1
+
+    def _check_streams(self, t: float) -> None:
+        """Ask for the estimate's streams at first contact and again whenever the position stream has slowed (a
+        ground station's REQUEST_DATA_STREAM resets the autopilot's rates on this very channel); ask for the EKF
+        origin and the ground-station system id until they are known."""
+        self.next_stream_check = t + STREAM_CHECK
+        s = self.seen
+        assert self.enc is not None and s.sysid is not None
+        wanted = 0.8 * 1e6 / STREAMS[apm.MAVLINK_MSG_ID_LOCAL_POSITION_NED]
+        if not self.streams_asked or s.rate(t) < wanted:
+            for msgid, interval in STREAMS.items():
+                self.send_message(self.enc.command_long_encode(s.sysid, s.compid, apm.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                                        msgid, interval, 0, 0, 0, 0, 0))
+            self.streams_asked = True
+        if s.origin is None:
+            self.send_message(self.enc.command_long_encode(s.sysid, s.compid, apm.MAV_CMD_REQUEST_MESSAGE, 0,
+                                                    apm.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, 0, 0, 0, 0, 0, 0))
+        if not any(p in s.params for p in GCS_SYSID_PARAMS):
+            for name in GCS_SYSID_PARAMS:
+                self.send_message(self.enc.param_request_read_encode(s.sysid, s.compid, name.encode(), -1))
+
+    def send_message(self, msg, enc: apm.MAVLink | None = None) -> None:
+        """One message to the autopilot, as the companion (or through ``enc``, as the keepalive's sender)."""
+        enc = enc or self.enc
+        assert enc is not None
+        self.send(bytes(msg.pack(enc)))
+        enc.seq = (enc.seq + 1) % 256
+
+
+def mode_name(mode: int | None) -> str:
+    return "unknown" if mode is None else ROVER_MODES.get(mode, f"mode {mode}")
+
+
+def _param_name(raw) -> str:
+    if isinstance(raw, bytes):
+        raw = raw.decode("ascii", "replace")
+    return raw.split("\x00", 1)[0]

@@ -1,0 +1,152 @@
+"""What drives the robot while a return-service lease is current (docs/architecture.md §3.5, §6, §9).
+
+The lease book decides *that* a block of the return plan holds the current lease; ``ReturnDriver`` drives it.
+Normally that is the auto-return service (``vehicle/service.py``), started when a block becomes current and
+stepped every tick under a sublease of its lease that is renewed at every replan. The simulator can inject a
+``Contingency`` instead (its baselines: hold, straight-line RTL, SmartRTL, back-up), so the same vehicle, lease
+book, triggers and MAVLink fly another link-loss behaviour and only the driving differs.
+
+A fault in the service never ends the process: the return runs exactly when the link is gone and nobody could
+restart the vehicle, so a raising block ends as STUCK (the next block of the chain, or a fresh operator lease,
+takes over) and the vehicle says so.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import TYPE_CHECKING, Protocol
+
+from vehicle.lease import ExecutionLease, ExpireReason, ServiceBlock
+from vehicle.lease_terms import State
+from vehicle.service import NAV_LOITER_TIME, NAV_WAYPOINT, ServiceState
+from vehicle.service import displacement as block_displacement
+from vehicle.service import start as start_block
+from vehicle.service import step as step_block
+
+if TYPE_CHECKING:
+    from vehicle.app import Vehicle
+    from vehicle.estimator import Estimator
+    from vehicle.trail import Trail
+
+
+class Contingency(Protocol):
+    """What the vehicle does, in place of its return plan's blocks, while a return-service lease is current.
+
+    The one door for comparing link-loss behaviours on this very vehicle (§9): the lease book, its triggers,
+    telemetry and MAVLink stay exactly as they are, only the driving during a return differs. The simulator's
+    baselines (hold, straight-line RTL, SmartRTL, back-up) implement it; a robot leaves it None.
+    """
+
+    halts_on_regain: bool  # False: LINK_REGAINED does not end the running block (it runs to its own end)
+    holding: bool  # True while its rules keep the robot standing still (reported as HOLDING, not RETURNING)
+
+    def observe(self, vehicle: Vehicle, t: float) -> None:
+        """Every tick, after the estimator: a behaviour that keeps its own memory (SmartRTL's path) records."""
+
+    def drive(self, vehicle: Vehicle, t: float, x: float, y: float, yaw: float) -> tuple[float, float,
+                                                                                       ExpireReason | None]:
+        """One tick of the current service lease: speed, yaw rate, and why the block ended (None: running)."""
+
+
+def blocks_for(contingency: Contingency | None, blocks: tuple[ServiceBlock, ...]) -> tuple[ServiceBlock, ...]:
+    """The blocks as the lease book schedules them: a contingency that does not halt when the link comes back
+    (SmartRTL) keeps its block running through LINK_REGAINED."""
+    if contingency is None or contingency.halts_on_regain:
+        return blocks
+    return tuple(replace(b, halt_on_regain=False) for b in blocks)
+
+
+class ReturnDriver:
+    """Drives the current return-service lease: the plan's block through the auto-return service, or the
+    injected contingency. Mutable: it holds the running block's service state between ticks."""
+
+    def __init__(self, vehicle: Vehicle) -> None:
+        self.vehicle = vehicle  # its ``contingency`` (None: the plan's service) may be swapped between runs
+        self.service: ServiceState | None = None  # the running block's state (None: no block started)
+        self.index: int | None = None  # the lease index that state belongs to
+        self.faults = 0  # blocks ended because the service raised (each reported, never fatal)
+        self.reached: list[int] = []  # plan items reached (MISSION_ITEM_REACHED), drained by the endpoint
+
+    def stand_down(self) -> None:
+        """An operator lease is current: no block runs."""
+        self.service, self.index = None, None
+
+    def drive(self, t: float, cur: ExecutionLease, x: float, y: float, yaw: float, trail: Trail,
+              estimator: Estimator, outbound_speed: float) -> tuple[float, float]:
+        """One tick of ``cur``, the current return-service lease: speed and yaw rate."""
+        v = self.vehicle
+        if v.contingency is not None:
+            return self._contingency(t, cur, x, y, yaw)
+        book = v.book
+        link_lost = book.link.lost
+        fresh = self.service is None or self.index != cur.index
+        try:
+            if fresh:
+                step = start_block(cur.block, x, y, t, trail, v.params, link_lost, outbound_speed)
+            else:
+                step = step_block(self.service, x, y, yaw, t, trail, v.params, link_lost, outbound_speed,
+                                  slipping=estimator.slipping)
+        except Exception as e:  # noqa: BLE001 - the return runs when nobody can restart the vehicle
+            return self._fault(cur.index, e, t)
+        if fresh:
+            self.index = cur.index
+        if step.replanned and book.current_id is not None:
+            if not fresh and self.service is not None:
+                self.reached.append(self.service.items[self.service.item].seq)
+            v.book, _ = v.book.issue_sublease(book.current_id)
+        self.service = step.state
+        if step.finished is not None:
+            st = step.state
+            if step.finished is ExpireReason.COMPLETED and 0 <= st.item < len(st.items):
+                self.reached.append(st.items[st.item].seq)
+            v.apply(v.book.finish(cur.index, step.finished, t))
+            return 0.0, 0.0
+        return step.speed, step.yaw_rate
+
+    def _fault(self, index: int, error: Exception, t: float) -> tuple[float, float]:
+        """The return service raised: end its block as STUCK, hold still this tick, and say so."""
+        v = self.vehicle
+        self.faults += 1
+        self.service, self.index = None, None
+        v.notices.append(f"return service fault in lease {index}: {type(error).__name__}: {error}; "
+                         f"block ended, holding")
+        v.apply(v.book.finish(index, ExpireReason.STUCK, t))
+        return 0.0, 0.0
+
+    def _contingency(self, t: float, cur: ExecutionLease, x: float, y: float, yaw: float) -> tuple[float, float]:
+        """The injected behaviour drives the current service lease, under a sublease of it like any return."""
+        v = self.vehicle
+        contingency = v.contingency
+        assert contingency is not None
+        if self.index != cur.index and v.book.current_id is not None:
+            self.service, self.index = None, cur.index
+            v.book, _ = v.book.issue_sublease(v.book.current_id)
+        speed, yaw_rate, finished = contingency.drive(v, t, x, y, yaw)
+        if finished is not None:
+            v.apply(v.book.finish(cur.index, finished, t))
+            return 0.0, 0.0
+        return speed, yaw_rate
+
+    # ----- what the running block reports ------------------------------------------------------------------
+    def state(self) -> int:
+        """RETURNLINK_STATE while a return-service lease is current."""
+        contingency = self.vehicle.contingency
+        if contingency is not None:
+            return State.HOLDING if contingency.holding else State.RETURNING
+        st = self.service
+        if st is None or st.item < 0:
+            return State.RETURNING
+        command = st.items[st.item].command
+        if command == NAV_LOITER_TIME:
+            return State.HOLDING
+        return State.NAVIGATING if command == NAV_WAYPOINT else State.RETURNING
+
+    def displacement(self, x: float, y: float) -> float:
+        """How far the running block has taken the robot from where it started."""
+        return 0.0 if self.service is None else block_displacement(self.service, x, y)
+
+    def route_remaining(self) -> float:
+        st = self.service
+        if st is None or st.path is None:
+            return 0.0
+        return max(0.0, st.path.length - st.progress)
