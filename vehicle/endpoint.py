@@ -1,16 +1,16 @@
-"""The vehicle's MAVLink endpoint (DESIGN §4): bytes in, bytes out, as a composition of microservices.
+"""The vehicle's MAVLink endpoint (docs/architecture.md §4): bytes in, bytes out, as a composition of microservices.
 
 ``receive(data, t)`` parses frames with the generated ``returnlink`` dialect (``link.codec``), counts them, drops
-what is addressed to another system or component, lets the signing gate judge the rest (DESIGN §4.1), tells the
-vehicle its owner was heard, and hands each message to the one service that declared it (``vehicle.services``).
-``tick(t)`` runs the services' time-driven work in order and returns every frame produced since the last tick.
-It owns no clock and no socket: whatever loop drives the vehicle calls both.
+what is addressed to another system or component, lets the signing gate judge the rest (docs/architecture.md §4.1),
+tells the vehicle its owner was heard, and hands each message to the one service that declared it
+(``vehicle.services``). ``tick(t)`` runs the services' time-driven work in order and returns every frame produced
+since the last tick. It owns no clock and no socket: whatever loop drives the vehicle calls both.
 
-Which services, the component id and the heartbeat's identity are parameters, so a companion computer (DESIGN §11)
-composes the same operator-control, lease, plan, parameter, signing and heartbeat services on component 191 and
-passes ``forward``: it receives what no service of the composition owns (a message type nobody declared, a command
-nobody carries out, a frame addressed to another component) and routes it to the autopilot.
-"""
+Which services, the component id and the heartbeat's identity are parameters, so a companion computer
+(docs/architecture.md §11) composes the same operator-control, lease, plan, parameter, signing and telemetry
+services on component 191 (``vehicle.companion.app``), behind the router that decides what reaches it. A
+composition may also pass ``forward``: it then receives what no service owns (a message type nobody declared, a
+command nobody carries out, a frame addressed to another component) instead of its being dropped."""
 
 from __future__ import annotations
 
@@ -161,7 +161,7 @@ class Endpoint:
 
     def pinned(self) -> list[Hashable]:
         """Addresses the transport must never drop from its peer table: the owner's and, with a key installed,
-        every station signing with it (DESIGN §3.9)."""
+        every station signing with it (docs/architecture.md §3.9)."""
         keep = set(self.signed)  # with a key, every station that signs with it (it may become the owner)
         if self.vehicle.book.owner is not None:
             keep.add(self.vehicle.book.owner)

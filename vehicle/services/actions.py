@@ -1,4 +1,4 @@
-"""The vehicle's own actions as commands (DESIGN §4): arm, modes, return to launch, return to link.
+"""The vehicle's own actions as commands (docs/architecture.md §4): arm, modes, return to launch, return to link.
 
 Every action is a state change under the lease rules: the vehicle decides (``Vehicle.command``, ``rtl``,
 ``take_manual``, ``return_now``) and this service answers with what it decided. A mode arrives in the PX4 or the

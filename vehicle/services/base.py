@@ -38,7 +38,7 @@ class Source(NamedTuple):
 
     sysid: int
     compid: int
-    trusted: bool = True  # signed with the installed key, or no key is installed (DESIGN §4.1)
+    trusted: bool = True  # signed with the installed key, or no key is installed (docs/architecture.md §4.1)
 
 
 class Outbox:

@@ -1,4 +1,5 @@
-"""The command microservice (DESIGN §3.9, §4): COMMAND_LONG and COMMAND_INT in, exactly one COMMAND_ACK out.
+"""The command microservice (docs/architecture.md §3.9, §4): COMMAND_LONG and COMMAND_INT in, exactly one COMMAND_ACK
+out.
 
 The services of a component declare the commands they carry out (``@command(mav.MAV_CMD_...)``); this one owns
 only what every command shares: the table from command id to handler, the parameter check of

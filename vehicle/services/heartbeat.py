@@ -1,12 +1,11 @@
-"""Who a component is and what mode it is in: HEARTBEAT and the standard modes microservice (DESIGN §4).
+"""Who a component is and what mode it is in: HEARTBEAT and the standard modes microservice (docs/architecture.md §4).
 
 The heartbeat names the component's type and autopilot (a native vehicle: its robot's MAV_TYPE and
-MAV_AUTOPILOT_GENERIC; a companion computer: ONBOARD_CONTROLLER and INVALID, DESIGN §11), whether it is armed,
-and its state as a PX4 custom mode (``vehicle.modes``). CURRENT_MODE and AVAILABLE_MODES (MAVLink's
+MAV_AUTOPILOT_GENERIC; a companion computer: ONBOARD_CONTROLLER and INVALID, docs/architecture.md §11), whether it
+is armed, and its state as a PX4 custom mode (``vehicle.modes``). CURRENT_MODE and AVAILABLE_MODES (MAVLink's
 development.xml) let ground stations that know the standard modes name them without guessing from the autopilot
 type. The returnlink dialect (common.xml + lease messages) does not include those two messages: they are encoded
-with pymavlink's own development module, so the dialect contract stays unchanged.
-"""
+with pymavlink's own development module, so the dialect contract stays unchanged."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The mission protocol as the return plan's way in (DESIGN §4 "The return plan is a mission").
+"""The mission protocol as the return plan's way in (docs/architecture.md §4 "The return plan is a mission").
 
 The transfer itself (uploads as transactions, re-requests, downloads, MISSION_ACK codes) is
 ``mission_transfer.MissionServer``; this service puts it on the wire and gives the lists their meaning: an upload

@@ -1,4 +1,5 @@
-"""Operator control and leases on the wire (DESIGN §3, §4): who holds the vehicle, and every lease transition told.
+"""Operator control and leases on the wire (docs/architecture.md §3, §4): who holds the vehicle, and every lease
+transition told.
 
 REQUEST_OPERATOR_CONTROL takes or gives up the root lease (the upstream GCS operator-control microservice),
 LEASE_CLAIM and LEASE_EXPIRE move along the execution-lease sequence; the lease book decides, this service only

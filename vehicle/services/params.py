@@ -1,4 +1,5 @@
-"""The parameter protocol (DESIGN §5): every parameter readable by anyone, writable by the owner, REAL32 on the wire.
+"""The parameter protocol (docs/architecture.md §5): every parameter readable by anyone, writable by the owner, REAL32
+on the wire.
 
 PARAM_REQUEST_LIST and PARAM_REQUEST_READ are reads, answered to any station. PARAM_SET is a state change: from
 anyone but the owner (while someone owns the vehicle) it is refused, and a value out of range is refused by the

@@ -1,4 +1,5 @@
-"""Message signing on one link (DESIGN §4.1): the gate in front of every service, key rotation, the timestamp file.
+"""Message signing on one link (docs/architecture.md §4.1): the gate in front of every service, key rotation, the
+timestamp file.
 
 ``link.signing`` is the pure core (a frame judged against a key and the streams seen); this service is its state on
 one component: the installed key, the streams accepted so far, the outgoing timestamp (never backwards, saved to

@@ -1,7 +1,7 @@
-"""What the vehicle reports and when (DESIGN §4 telemetry): the heartbeat, position and attitude, health, home,
-mission progress, operator control and lease status, each at its own rate, some also on change; and the commands
-that ask for telemetry (REQUEST_MESSAGE, GET_HOME_POSITION, REQUEST_AUTOPILOT_CAPABILITIES) or change its rates
-(SET_MESSAGE_INTERVAL, a state change only the owner may make).
+"""What the vehicle reports and when (docs/architecture.md §4 telemetry): the heartbeat, position and attitude, health,
+home, mission progress, operator control and lease status, each at its own rate, some also on change; and the
+commands that ask for telemetry (REQUEST_MESSAGE, GET_HOME_POSITION, REQUEST_AUTOPILOT_CAPABILITIES) or change its
+rates (SET_MESSAGE_INTERVAL, a state change only the owner may make).
 
 Positions come from the estimator, never from ground truth, because that is all a real vehicle knows. A companion
 computer composes the same service with its own identity (``mav_type``, ``autopilot``) and only the streams it
@@ -102,7 +102,7 @@ class Telemetry(Service):
 
     @command(mav.MAV_CMD_SET_MESSAGE_INTERVAL)
     def _message_interval(self, p: tuple, src: Source, t: float) -> Reply:
-        """Telemetry rates are vehicle state shared by every station (DESIGN §3.9): only the owner changes
+        """Telemetry rates are vehicle state shared by every station (docs/architecture.md §3.9): only the owner changes
         them; with nobody owning, any plain client may (MAVSDK and MAVProxy set intervals when they connect)."""
         v = self.vehicle
         if v.refuses(src.sysid):
@@ -115,9 +115,10 @@ class Telemetry(Service):
         """SET_MESSAGE_INTERVAL: -1 off, 0 default, else microseconds. False for what is not telemetry here."""
         if msgid not in BUILDERS or msgid == mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             return False
-        if interval_us == -1:
-            self.intervals[msgid] = math.inf
-        elif interval_us == 0:
+        if interval_us == -1:  # off: nothing more of it, not even the one a new rate sends at once
+            self.intervals[msgid] = self.due[msgid] = math.inf
+            return True
+        if interval_us == 0:
             self.intervals[msgid] = self.rates.get(msgid, math.inf)
         elif interval_us > 0:
             self.intervals[msgid] = max(0.02, interval_us / 1e6)

@@ -1,4 +1,4 @@
-"""Teleoperation on the wire (DESIGN §4): MANUAL_CONTROL and velocity SET_POSITION_TARGET_LOCAL_NED.
+"""Teleoperation on the wire (docs/architecture.md §4): MANUAL_CONTROL and velocity SET_POSITION_TARGET_LOCAL_NED.
 
 Both streams arrive at 10 Hz from a station that drives; each frame becomes one teleop setpoint the lease rules
 judge (``Vehicle.command``). A refused stream is announced once every REJECT_NOTICE_GAP seconds per sender, not
