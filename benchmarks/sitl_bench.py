@@ -49,8 +49,6 @@ GROUPS = [
     ("pymavlink/", "pymavlink (pack, parse)"), ("link/dialect", "pymavlink (pack, parse)"),
     ("vehicle/app.py", "vehicle loop"), ("vehicle/control.py", "vehicle loop"),
     ("vehicle/contingency.py", "vehicle loop"), ("vehicle/teleop.py", "vehicle loop"),
-    ("vehicle/mavlink.py", "vehicle endpoint"),
-    ("vehicle/missions.py", "vehicle endpoint"), ("vehicle/telemetry.py", "telemetry"),
     ("vehicle/modes.py", "telemetry"), ("vehicle/lease", "lease"), ("vehicle/link_watch.py", "link watch"),
     ("vehicle/trail.py", "trail, return, navigation"), ("vehicle/returning.py", "trail, return, navigation"),
     ("vehicle/service.py", "trail, return, navigation"), ("vehicle/navigation.py", "trail, return, navigation"),
@@ -183,7 +181,7 @@ def round_trips(n: int = ROUND_TRIPS) -> list[float]:
     """Wall seconds from sending a COMMAND_LONG to receiving its COMMAND_ACK, ``n`` times at random phases of the
     vehicle's tick, against `sim serve`'s Server on 127.0.0.1 (perfect link), in a thread of this process."""
     from sim.serve import Server
-    from vehicle.mavlink import mav
+    from vehicle.services.base import mav
 
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(("127.0.0.1", 0))

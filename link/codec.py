@@ -1,6 +1,6 @@
 """Reading MAVLink frames out of datagrams, with pymavlink's own parser, at the cost of one frame per datagram.
 
-Both ends (``vehicle.mavlink.Endpoint`` and ``gcs.station.GroundStation``) receive UDP datagrams or radio packets,
+Both ends (``vehicle.endpoint.Endpoint`` and ``gcs.station.GroundStation``) receive UDP datagrams or radio packets,
 and almost every one holds exactly one complete MAVLink 2 frame. pymavlink's ``parse_buffer`` does not know that:
 it runs its byte-stream state machine over the datagram, then calls it again to learn that nothing is left, and at
 50 Hz both ends pay that for every frame. ``read_frames`` gives the same answer cheaper:

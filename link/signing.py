@@ -48,9 +48,6 @@ class SigningVerdict(Enum):
     TOO_OLD = "too old"  # correctly signed, a stream never seen, more than 60 s behind our clock
 
 
-# the name it had before the lease rules' Verdict claimed it; kept while vehicle/mavlink.py still imports it
-Verdict = SigningVerdict
-
 StreamId = tuple[int, int, int]  # (sysid, compid, link id) of the sender
 
 

@@ -17,8 +17,8 @@ from sim.scenario import Scenario
 from sim.sensors import Sensors
 from sim.world import World
 from vehicle.app import Contingency, Vehicle
+from vehicle.endpoint import Endpoint
 from vehicle.io import Readings
-from vehicle.mavlink import Endpoint
 from vehicle.params import load_defaults
 from vehicle.storage import remove_leftovers
 

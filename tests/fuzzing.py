@@ -21,8 +21,9 @@ from dataclasses import dataclass, field
 
 from link.plan_items import KINDS
 from tests.harness import Pair
-from vehicle.mavlink import COMMANDS, HANDLED, mav
 from vehicle.params import SPECS
+from vehicle.services.base import mav
+from vehicle.services.native import COMMANDS, HANDLED
 
 OWNER = 255
 VEHICLE = 1

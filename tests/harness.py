@@ -9,7 +9,7 @@ from link.signing import Key
 from sim.driver import SimDriver
 from sim.scenario import load
 from vehicle.app import DT, Vehicle
-from vehicle.mavlink import Endpoint
+from vehicle.endpoint import Endpoint
 from vehicle.params import load_defaults
 
 

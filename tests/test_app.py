@@ -7,9 +7,10 @@ import numpy as np
 from sim.driver import SimDriver
 from sim.scenario import load
 from vehicle.app import DT, Vehicle, run
+from vehicle.endpoint import Endpoint
 from vehicle.estimator import Pose
-from vehicle.mavlink import Endpoint, mav
 from vehicle.params import load_defaults
+from vehicle.services.base import mav
 
 
 def test_run_paces_ticks_by_the_injected_clock_and_moves_frames():

@@ -16,7 +16,9 @@ from link.signing import Key, SigningVerdict, signature_block, sim_stamp
 from tests.harness import Pair
 from vehicle.app import State
 from vehicle.keystore import KeyStore, read_key, write_key
-from vehicle.mavlink import ACCESS, COMMANDS, Access, mav
+from vehicle.services.base import mav
+from vehicle.services.native import COMMANDS
+from vehicle.services.signing import ACCESS, Access
 
 KEY = Key(bytes(range(32)))
 OTHER = Key(bytes(range(100, 132)))

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from tests.harness import Pair
 from vehicle.app import State
-from vehicle.mavlink import mav
+from vehicle.services.base import mav
 
 OWNER, STRANGER = 255, 245
 

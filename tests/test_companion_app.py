@@ -6,7 +6,7 @@ from __future__ import annotations
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from link import dialect
-from link.signing import Key, Streams, Verdict
+from link.signing import Key, SigningVerdict, Streams
 from tests.companion_rig import GUIDED, HOLD, MANUAL, FakeAutopilot, Rig
 from vehicle.app import State
 from vehicle.lease import ExpireReason
@@ -349,7 +349,7 @@ def test_with_a_key_only_signed_frames_act_and_the_autopilot_is_relayed_signed()
         if f[5:7] == b"\x01\x01":  # the autopilot's own frames, relayed
             streams, v = streams.verify(key, f, 0)
             verdicts.append(v)
-    assert verdicts and set(verdicts) == {Verdict.ACCEPT}
+    assert verdicts and set(verdicts) == {SigningVerdict.ACCEPT}
 
 
 def test_params_of_the_companion_are_its_own_parameters_addressed_to_191():

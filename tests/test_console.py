@@ -21,8 +21,8 @@ from sim.driver import SimDriver
 from sim.scenario import load
 from tests.interop import ServedVehicle, free_udp_port, wait_until
 from vehicle.app import DT, Vehicle
+from vehicle.endpoint import Endpoint
 from vehicle.lease import ExpireReason
-from vehicle.mavlink import Endpoint
 from vehicle.params import load_defaults
 
 mav = dialect.load()

@@ -9,9 +9,9 @@ import pytest
 from gcs.plans import parse_spec
 from tests.harness import Pair
 from vehicle.app import State
-from vehicle.mavlink import mav
 from vehicle.modes import decode_mode
 from vehicle.params import SPECS
+from vehicle.services.base import mav
 
 
 def acquired(pair: Pair) -> Pair:
@@ -313,7 +313,7 @@ def test_every_handler_is_routed_and_targets_are_checked_from_the_table():
     """``Endpoint.handle`` takes each type's handler and target fields from its routes, not from probing the
     message: every message type a composed service declares must reach that service, and the table must judge
     targets as the fields say."""
-    from vehicle.mavlink import HANDLED
+    from vehicle.services.native import HANDLED
 
     pair = Pair()
     declared = {kind: s for s in pair.endpoint.services for kind in type(s).MESSAGES}

@@ -15,7 +15,7 @@ from sim.serve import Server
 from vehicle import epochs
 from vehicle.app import DT
 from vehicle.epochs import HEADER, EpochLog, Span, choose, clear_of
-from vehicle.mavlink import mav
+from vehicle.services.base import mav
 from vehicle.storage import StoredFileError
 
 GCS = 255

@@ -7,7 +7,7 @@ from tests.harness import Pair
 from vehicle import contingency
 from vehicle.app import State
 from vehicle.lease import ExpireReason, Holder
-from vehicle.mavlink import mav
+from vehicle.services.base import mav
 
 
 def returning(pair: Pair) -> Pair:

@@ -23,6 +23,6 @@ def test_the_ground_station_needs_no_onboard_code():
 
 
 def test_the_vehicle_runs_without_the_simulator():
-    loaded = _loaded_after_importing(["vehicle.app", "vehicle.mavlink", "vehicle.keystore", "vehicle.epochs",
+    loaded = _loaded_after_importing(["vehicle.app", "vehicle.keystore", "vehicle.epochs",
                                       "vehicle.companion.app", "vehicle.companion.cli"])
     assert "vehicle" in loaded and "sim" not in loaded

@@ -8,9 +8,9 @@ import struct
 from pymavlink.dialects.v20 import development as dev
 
 from tests.harness import Pair
-from vehicle.mavlink import mav
 from vehicle.modes import AVAILABLE_MODES, PX4_AUTO, PX4_AUTO_LOITER, PX4_AUTO_RTL, PX4_POSCTL
 from vehicle.params import SPECS
+from vehicle.services.base import mav
 
 FTP_OPEN_FILE_RO, FTP_NAK, FTP_ERR_UNKNOWN_COMMAND = 4, 129, 7
 

@@ -18,7 +18,7 @@ from link.plan_items import (
     check_item,
 )
 from tests.harness import Pair
-from vehicle.mavlink import mav
+from vehicle.services.base import mav
 
 NAN, INF = math.nan, math.inf
 

@@ -9,7 +9,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tests.harness import Pair
-from vehicle.mavlink import mav
+from vehicle.services.base import mav
 
 FLOATS = st.floats(allow_nan=True, allow_infinity=True, width=32)
 SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -142,7 +142,7 @@ def test_mission_items_out_of_sequence_or_from_another_station_are_ignored():
 
 def test_every_supported_command_with_non_finite_parameters_gets_exactly_one_ack():
     """Found by the property test above: SET_MESSAGE_INTERVAL with an infinite id raised and went unanswered."""
-    from vehicle.mavlink import COMMANDS
+    from vehicle.services.native import COMMANDS
 
     pair = owned_pair()
     stranger, owner = _encoder(66), _encoder(255)

@@ -137,7 +137,7 @@ def test_sim_serve_answers_a_command_in_the_tick_it_arrived():
     clock is injected: simulated time only)."""
     from sim.scenario import load
     from sim.serve import Server
-    from vehicle.mavlink import mav
+    from vehicle.services.base import mav
 
     server = Server(load("open"), port=0, peers=(), perfect_link=True)
     gcs = mav.MAVLink(None, 255, 190)
@@ -166,7 +166,7 @@ def test_sim_serve_answers_a_command_arriving_between_ticks_at_once():
     next tick is answered then, through the radio proxy, not at the next tick (injected clock: simulated time)."""
     from sim.scenario import load
     from sim.serve import Server
-    from vehicle.mavlink import mav
+    from vehicle.services.base import mav
 
     server = Server(load("open"), port=0, peers=(), perfect_link=True)
     gcs = mav.MAVLink(None, 255, 190)

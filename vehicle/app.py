@@ -1,6 +1,6 @@
 """The vehicle: its command authority over the lease book, the parts it is made of, and the real-time shell.
 
-``Vehicle`` is everything onboard except MAVLink framing; ``vehicle.mavlink.Endpoint`` translates messages into
+``Vehicle`` is everything onboard except MAVLink framing; ``vehicle.endpoint.Endpoint`` translates messages into
 its methods. It is the command authority: every state-changing request (take or give up the root, claim or
 expire a lease, arm, hold, teleop, a return plan, a parameter) is decided by the lease book and its effect kept
 here, with what the endpoint must announce. It is made of

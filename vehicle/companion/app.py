@@ -24,8 +24,7 @@ from pathlib import Path
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from link.mission import Origin
-from link.signing import Key, Streams, sim_stamp
-from link.signing import Verdict as SignVerdict
+from link.signing import Key, SigningVerdict, Streams, sim_stamp
 from vehicle.app import Vehicle
 from vehicle.companion import router
 from vehicle.companion.autopilot import AutopilotDriver, is_autopilot_heartbeat, rover_problem
@@ -155,7 +154,7 @@ class Companion:
         trusted = True
         if self.key is not None:
             self.streams, verdict = self.streams.verify(self.key, raw, self.voice.enc.signing.timestamp)
-            trusted = verdict is SignVerdict.ACCEPT
+            trusted = verdict is SigningVerdict.ACCEPT
         if trusted and source is not None:
             self.sources[sender] = source
         r = router.route(m, sysid)

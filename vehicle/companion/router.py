@@ -37,7 +37,7 @@ AUTOPILOT_COMPID = apm.MAV_COMP_ID_AUTOPILOT1
 OWN_COMMANDS = frozenset((rl.MAV_CMD_REQUEST_OPERATOR_CONTROL, rl.MAV_CMD_LEASE_CLAIM, rl.MAV_CMD_LEASE_EXPIRE,
                           rl.MAV_CMD_NAV_RETURN_TO_LINK))
 
-# the answer to a refusal, by reason, as the native vehicle gives it (vehicle/mavlink.py REJECT_RESULT)
+# the answer to a refusal, by reason, as the native vehicle gives it (vehicle/services/commands.py REJECT_RESULT)
 REJECT_RESULT = {
     RejectReason.NOT_IN_CONTROL: rl.MAV_RESULT_NOT_IN_CONTROL,
     RejectReason.WRONG_EPOCH: rl.MAV_RESULT_DENIED,

@@ -16,8 +16,7 @@ from collections import Counter
 from collections.abc import Callable
 from enum import Enum
 
-from link.signing import MAX_TIMESTAMP, Key, Streams, advance, enable, sim_stamp, timestamp_of
-from link.signing import Verdict as SignVerdict
+from link.signing import MAX_TIMESTAMP, Key, SigningVerdict, Streams, advance, enable, sim_stamp, timestamp_of
 from vehicle.app import Vehicle
 from vehicle.keystore import STAMP_SAVE_EVERY, KeyStore, boot_stamp
 from vehicle.services.base import Outbox, Service, Source, Throttle, handles, mav
@@ -106,7 +105,7 @@ class Signing(Service):
         frame = bytes(m.get_msgbuf())
         self.streams, verdict = self.streams.verify(self.key, frame, self.timestamp(t))
         self.verdicts[verdict] += 1
-        if verdict is SignVerdict.ACCEPT:
+        if verdict is SigningVerdict.ACCEPT:
             advance(self.out.mav, timestamp_of(frame) or 0)  # the spec: continue from the newest timestamp accepted
             return True
         if access(m) is not Access.ACT:
@@ -114,7 +113,7 @@ class Signing(Service):
         self._refuse(m, verdict, sender, t)
         return None
 
-    def _refuse(self, m, verdict: SignVerdict, sender: int, t: float) -> None:
+    def _refuse(self, m, verdict: SigningVerdict, sender: int, t: float) -> None:
         self.vehicle.commands_rejected += 1
         self.refused_since_notice += 1
         if not self.notices.due("refused", t):
