@@ -12,6 +12,7 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from gcs.file_transfer import Download, FileClient
 from gcs.mission_transfer import MissionClient, Transfer
 from link import dialect
 from link.codec import read_frames
@@ -30,7 +31,6 @@ STOPPED = ("velocity", 0.0, 0.0, math.nan)  # the teleop stream of a station hol
 # the dialect's message types that carry a target_system, by name: most of the vehicle's telemetry does not, and
 # asking each of those frames for the field would cost a failed attribute lookup per frame
 TARGETED = frozenset(cls.msgname for cls in mav.mavlink_map.values() if "target_system" in cls.fieldnames)
-# SET_POSITION_TARGET_LOCAL_NED for a velocity (and a yaw rate unless that is ignored too): every other field ignored
 
 
 @dataclass(frozen=True)
@@ -139,6 +139,7 @@ class GroundStation:
         # no retry can be due, and the tick need not walk every command ever sent
         self._oldest_unanswered = math.inf
         self.missions = MissionClient(self.mav, target, target_comp)  # the mission protocol's ground side
+        self.files = FileClient(self.mav, target, target_comp)  # MAVLink FTP's ground side (reads only)
         self.events: list[LeaseEventRecord] = []
         self.texts: list[tuple[float, str]] = []
         self._chunks: dict[int, dict[int, bytes]] = {}
@@ -184,6 +185,7 @@ class GroundStation:
                         self._send_command(p, confirmation=p.tries - 1)
             self._oldest_unanswered = min((p.sent_at for p in self.pending.values() if not p.done), default=math.inf)
         self.missions.tick(t)
+        self.files.tick(t)
         if self.teleop is not None and t >= self.next_teleop:
             self.next_teleop = t + TELEOP_PERIOD
             self._send_teleop()
@@ -278,6 +280,11 @@ class GroundStation:
         self.key = new
         enable(self.mav, new, ts + 1, self.mav.signing.link_id)
 
+    # ----- files (gcs/file_transfer.py) ---------------------------------------------------------------------
+    def fetch(self, path: str) -> Download:
+        """Start downloading the vehicle's file ``path`` over MAVLink FTP (``linkmap.csv``: its link map)."""
+        return self.files.get(path, self.t)
+
     # ----- missions (gcs/mission_transfer.py) ---------------------------------------------------------------
     @property
     def transfer(self) -> Transfer | None:
@@ -317,7 +324,8 @@ class GroundStation:
         if kind in TARGETED and m.target_system != 0 and m.target_system != self.sysid:
             return  # addressed to another station
         name = kind.lower()
-        handler = getattr(self, f"_on_{name}", None) or getattr(self.missions, f"on_{name}", None)
+        handler = (getattr(self, f"_on_{name}", None) or getattr(self.missions, f"on_{name}", None)
+                   or getattr(self.files, f"on_{name}", None))
         if handler is not None:
             handler(m, t)
         for fn in self.listeners:

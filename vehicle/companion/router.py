@@ -25,7 +25,7 @@ from typing import NamedTuple
 
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
-from link import dialect
+from link import dialect, ftp
 from vehicle.lease import LeaseBook, RejectReason, Verdict
 
 rl = dialect.load()
@@ -45,9 +45,6 @@ REJECT_RESULT = {
     RejectReason.INVALID: rl.MAV_RESULT_DENIED,
 }
 
-# MAVLink FTP opcodes that only read (the rest create, write, remove or rename files)
-FTP_READS = frozenset((0, 1, 2, 3, 4, 5, 14, 15))
-FTP_NAK, FTP_ERR_FILE_PROTECTED = 129, 9
 
 
 class Dest(enum.Enum):
@@ -149,7 +146,7 @@ def access(m) -> Access:
         return Access.MODE
     if kind == "FILE_TRANSFER_PROTOCOL":
         payload = bytes(m.payload)
-        return Access.READ if len(payload) > 3 and payload[3] in FTP_READS else Access.PLAN
+        return Access.READ if len(payload) > 3 and payload[3] in ftp.READS else Access.PLAN
     return Access.LEASE
 
 
@@ -255,13 +252,10 @@ def answers(m, sender: int, scomp: int, result: int | None) -> Answers:
         autopilot.append(apm.MAVLink_param_request_read_message(m.target_system, m.target_component,
                                                                 _param_id(m.param_id), -1))
     elif kind == "FILE_TRANSFER_PROTOCOL" and result is not None:
-        payload = bytes(m.payload)
-        if len(payload) >= 12 and payload[3] < 128:
-            seq = int.from_bytes(payload[0:2], "little")
-            nak = ((seq + 1) & 0xFFFF).to_bytes(2, "little") + bytes(
-                (payload[2], FTP_NAK, 1, payload[3], 0, 0)) + bytes(4) + bytes((FTP_ERR_FILE_PROTECTED,))
-            ground.append((comp, apm.MAVLink_file_transfer_protocol_message(0, sender, scomp,
-                                                                            list(nak + bytes(251 - len(nak))))))
+        p = ftp.decode(m.payload)
+        if p is not None and p.opcode < ftp.OP_ACK:
+            nak = ftp.encode(p.seq + 1, p.session, ftp.OP_NAK, bytes((ftp.ERR_FILE_PROTECTED,)), 0, p.opcode)
+            ground.append((comp, apm.MAVLink_file_transfer_protocol_message(0, sender, scomp, nak)))
     return Answers(ground, autopilot)
 
 

@@ -12,7 +12,7 @@ from collections.abc import Mapping
 from vehicle.services.actions import VehicleActions
 from vehicle.services.base import Parts, Service, mav
 from vehicle.services.commands import CommandServer
-from vehicle.services.ftp import FtpRefusal
+from vehicle.services.ftp import FtpServer
 from vehicle.services.mission import MissionService
 from vehicle.services.operator import OperatorControl
 from vehicle.services.params import ParamServer
@@ -34,11 +34,11 @@ def vehicle_services(p: Parts, *, rates: Mapping[int, float] = DEFAULT_RATES, dr
     missions = MissionService(p.out, p.vehicle, p.origin, telemetry.emit)
     teleop = [Teleop(p.out, p.vehicle, p.counters, p.sysid)] if drives else []
     return [OperatorControl(p.out, p.vehicle, p.boot_t), missions, p.signing, telemetry,
-            ParamServer(p.out, p.vehicle, p.param_file), *teleop, VehicleActions(p.out, p.vehicle), FtpRefusal(p.out)]
+            ParamServer(p.out, p.vehicle, p.param_file), *teleop, VehicleActions(p.out, p.vehicle), FtpServer(p.out)]
 
 
 # the service classes of the native composition, with the command server every composition has
 VEHICLE_SERVICES: tuple[type[Service], ...] = (CommandServer, OperatorControl, MissionService, Signing, Telemetry,
-                                               ParamServer, Teleop, VehicleActions, FtpRefusal)
+                                               ParamServer, Teleop, VehicleActions, FtpServer)
 COMMANDS = {cid: fn for cls in VEHICLE_SERVICES for cid, fn in cls.COMMANDS.items()}  # MAV_CMD id -> handler
 HANDLED = frozenset(kind for cls in VEHICLE_SERVICES for kind in cls.MESSAGES)  # message types the vehicle answers
