@@ -8,7 +8,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from link import dialect
-from vehicle.companion.router import Access, Dest, Kind, answers, decide, lease_text, route, what
+from vehicle.companion.router import Action, Authority, Dest, answers, decide, lease_text, route, what
 from vehicle.lease import LeaseBook
 
 rl = dialect.load()
@@ -27,42 +27,42 @@ def ftp(opcode: int, comp: int = 1):
 
 
 @pytest.mark.parametrize("msg, dest, access", [
-    (cmd(rl.MAV_CMD_LEASE_CLAIM, 191), Dest.COMPANION, Access.READ),
-    (cmd(rl.MAV_CMD_REQUEST_OPERATOR_CONTROL, 0), Dest.COMPANION, Access.READ),
-    (cmd(rl.MAV_CMD_NAV_RETURN_TO_LINK, 0, 0), Dest.COMPANION, Access.READ),
-    (cmd(apm.MAV_CMD_DO_SET_MODE, 191), Dest.COMPANION, Access.READ),  # addressed to 191: native semantics
-    (cmd(apm.MAV_CMD_COMPONENT_ARM_DISARM, 191), Dest.MISDIRECTED, Access.READ),  # only the autopilot arms
+    (cmd(rl.MAV_CMD_LEASE_CLAIM, 191), Dest.COMPANION, Authority.READ),
+    (cmd(rl.MAV_CMD_REQUEST_OPERATOR_CONTROL, 0), Dest.COMPANION, Authority.READ),
+    (cmd(rl.MAV_CMD_NAV_RETURN_TO_LINK, 0, 0), Dest.COMPANION, Authority.READ),
+    (cmd(apm.MAV_CMD_DO_SET_MODE, 191), Dest.COMPANION, Authority.READ),  # addressed to 191: native semantics
+    (cmd(apm.MAV_CMD_COMPONENT_ARM_DISARM, 191), Dest.MISDIRECTED, Authority.READ),  # only the autopilot arms
     (enc.set_position_target_local_ned_encode(0, 1, 191, 8, 0x05C7, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0),
-     Dest.MISDIRECTED, Access.READ),
-    (cmd(apm.MAV_CMD_DO_SET_MODE, 1), Dest.AUTOPILOT, Access.MODE),
-    (cmd(apm.MAV_CMD_DO_SET_MODE, 0), Dest.AUTOPILOT, Access.MODE),  # a broadcast mode change is the autopilot's
-    (cmd(apm.MAV_CMD_NAV_RETURN_TO_LAUNCH, 1), Dest.AUTOPILOT, Access.MODE),
-    (cmd(apm.MAV_CMD_COMPONENT_ARM_DISARM, 1), Dest.AUTOPILOT, Access.LEASE),
-    (cmd(apm.MAV_CMD_REQUEST_MESSAGE, 1), Dest.AUTOPILOT, Access.READ),
-    (cmd(apm.MAV_CMD_SET_MESSAGE_INTERVAL, 1), Dest.AUTOPILOT, Access.OWNER),
-    (enc.set_mode_encode(1, 1, 4), Dest.AUTOPILOT, Access.MODE),
-    (enc.param_request_list_encode(1, 0), Dest.AUTOPILOT, Access.READ),
-    (enc.param_request_list_encode(1, 191), Dest.COMPANION, Access.READ),
-    (enc.param_set_encode(1, 1, b"FS_ACTION", 2, 2), Dest.AUTOPILOT, Access.OWNER),
-    (enc.request_data_stream_encode(1, 1, 0, 4, 1), Dest.AUTOPILOT, Access.OWNER),
-    (enc.mission_count_encode(1, 0, 3, 0), Dest.AUTOPILOT, Access.PLAN),
-    (enc.mission_request_list_encode(1, 0, 0), Dest.AUTOPILOT, Access.READ),
-    (enc.mission_count_encode(1, 191, 3, 0), Dest.COMPANION, Access.READ),  # the return plan
-    (enc.manual_control_encode(1, 500, 0, 500, 0, 0), Dest.AUTOPILOT, Access.LEASE),
-    (enc.rc_channels_override_encode(1, 1, *([1500] * 8)), Dest.AUTOPILOT, Access.LEASE),
+     Dest.MISDIRECTED, Authority.READ),
+    (cmd(apm.MAV_CMD_DO_SET_MODE, 1), Dest.AUTOPILOT, Authority.MODE),
+    (cmd(apm.MAV_CMD_DO_SET_MODE, 0), Dest.AUTOPILOT, Authority.MODE),  # a broadcast mode change is the autopilot's
+    (cmd(apm.MAV_CMD_NAV_RETURN_TO_LAUNCH, 1), Dest.AUTOPILOT, Authority.MODE),
+    (cmd(apm.MAV_CMD_COMPONENT_ARM_DISARM, 1), Dest.AUTOPILOT, Authority.LEASE),
+    (cmd(apm.MAV_CMD_REQUEST_MESSAGE, 1), Dest.AUTOPILOT, Authority.READ),
+    (cmd(apm.MAV_CMD_SET_MESSAGE_INTERVAL, 1), Dest.AUTOPILOT, Authority.OWNER),
+    (enc.set_mode_encode(1, 1, 4), Dest.AUTOPILOT, Authority.MODE),
+    (enc.param_request_list_encode(1, 0), Dest.AUTOPILOT, Authority.READ),
+    (enc.param_request_list_encode(1, 191), Dest.COMPANION, Authority.READ),
+    (enc.param_set_encode(1, 1, b"FS_ACTION", 2, 2), Dest.AUTOPILOT, Authority.OWNER),
+    (enc.request_data_stream_encode(1, 1, 0, 4, 1), Dest.AUTOPILOT, Authority.OWNER),
+    (enc.mission_count_encode(1, 0, 3, 0), Dest.AUTOPILOT, Authority.PLAN),
+    (enc.mission_request_list_encode(1, 0, 0), Dest.AUTOPILOT, Authority.READ),
+    (enc.mission_count_encode(1, 191, 3, 0), Dest.COMPANION, Authority.READ),  # the return plan
+    (enc.manual_control_encode(1, 500, 0, 500, 0, 0), Dest.AUTOPILOT, Authority.LEASE),
+    (enc.rc_channels_override_encode(1, 1, *([1500] * 8)), Dest.AUTOPILOT, Authority.LEASE),
     (enc.set_position_target_local_ned_encode(0, 1, 1, 8, 0x05C7, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0),
-     Dest.AUTOPILOT, Access.LEASE),
-    (ftp(4), Dest.AUTOPILOT, Access.READ),  # OpenFileRO: MAVProxy fetches parameters this way
-    (ftp(7), Dest.AUTOPILOT, Access.PLAN),  # WriteFile
-    (enc.heartbeat_encode(6, 8, 0, 0, 4), Dest.KEEP, Access.READ),
-    (enc.setup_signing_encode(1, 1, [1] * 32, 0), Dest.SIGNING, Access.READ),
-    (cmd(apm.MAV_CMD_DO_SET_MODE, 1, 2), Dest.ELSEWHERE, Access.READ),  # another vehicle
-    (cmd(apm.MAV_CMD_DO_SET_MODE, 100), Dest.ELSEWHERE, Access.READ),  # a camera on this one
-    (enc.manual_control_encode(2, 500, 0, 500, 0, 0), Dest.ELSEWHERE, Access.READ),
+     Dest.AUTOPILOT, Authority.LEASE),
+    (ftp(4), Dest.AUTOPILOT, Authority.READ),  # OpenFileRO: MAVProxy fetches parameters this way
+    (ftp(7), Dest.AUTOPILOT, Authority.PLAN),  # WriteFile
+    (enc.heartbeat_encode(6, 8, 0, 0, 4), Dest.KEEP, Authority.READ),
+    (enc.setup_signing_encode(1, 1, [1] * 32, 0), Dest.SIGNING, Authority.READ),
+    (cmd(apm.MAV_CMD_DO_SET_MODE, 1, 2), Dest.ELSEWHERE, Authority.READ),  # another vehicle
+    (cmd(apm.MAV_CMD_DO_SET_MODE, 100), Dest.ELSEWHERE, Authority.READ),  # a camera on this one
+    (enc.manual_control_encode(2, 500, 0, 500, 0, 0), Dest.ELSEWHERE, Authority.READ),
 ])
 def test_route(msg, dest, access):
     r = route(msg, 1)
-    assert (r.dest, r.access) == (dest, access)
+    assert (r.dest, r.authority) == (dest, access)
 
 
 def unowned() -> LeaseBook:
@@ -81,47 +81,47 @@ def returning(owner: int = 255) -> LeaseBook:
 
 
 @pytest.mark.parametrize("access, kind", [
-    (Access.READ, Kind.FORWARD), (Access.OWNER, Kind.FORWARD), (Access.PLAN, Kind.ADMIT),
-    (Access.LEASE, Kind.ADMIT), (Access.MODE, Kind.TAKE),
+    (Authority.READ, Action.FORWARD), (Authority.OWNER, Action.FORWARD), (Authority.PLAN, Action.ADMIT),
+    (Authority.LEASE, Action.ADMIT), (Authority.MODE, Action.TAKE),
 ])
 def test_an_unowned_vehicle_grants_plain_clients_as_the_native_one_does(access, kind):
     assert decide(access, 255, 190, unowned(), 0.0).kind is kind
 
 
 def test_with_a_key_nobody_is_granted_the_root_by_a_command():
-    d = decide(Access.LEASE, 255, 190, unowned(), 0.0, keyed=True)
-    assert d.kind is Kind.REFUSE and d.result == rl.MAV_RESULT_NOT_IN_CONTROL
+    d = decide(Authority.LEASE, 255, 190, unowned(), 0.0, keyed=True)
+    assert d.kind is Action.REFUSE and d.result == rl.MAV_RESULT_NOT_IN_CONTROL
 
 
 def test_an_unsigned_state_change_is_refused_without_an_acknowledgement():
-    d = decide(Access.LEASE, 255, 190, owned_by(255), 0.0, trusted=False, keyed=True)
-    assert d.kind is Kind.REFUSE and d.result is None
-    assert decide(Access.READ, 255, 190, owned_by(255), 0.0, trusted=False, keyed=True).kind is Kind.FORWARD
+    d = decide(Authority.LEASE, 255, 190, owned_by(255), 0.0, trusted=False, keyed=True)
+    assert d.kind is Action.REFUSE and d.result is None
+    assert decide(Authority.READ, 255, 190, owned_by(255), 0.0, trusted=False, keyed=True).kind is Action.FORWARD
 
 
-@pytest.mark.parametrize("access", [Access.OWNER, Access.PLAN, Access.LEASE])
+@pytest.mark.parametrize("access", [Authority.OWNER, Authority.PLAN, Authority.LEASE])
 def test_a_stranger_is_refused_not_in_control_naming_the_lease(access):
     d = decide(access, 254, 190, owned_by(255), 0.0)
-    assert d.kind is Kind.REFUSE and d.result == rl.MAV_RESULT_NOT_IN_CONTROL
+    assert d.kind is Action.REFUSE and d.result == rl.MAV_RESULT_NOT_IN_CONTROL
     assert "GCS 255" in d.why and "[" in d.why
 
 
 def test_the_owner_under_its_claimed_lease_is_forwarded():
     book = owned_by(255)
-    for access in (Access.OWNER, Access.PLAN, Access.LEASE):
-        assert decide(access, 255, 190, book, 0.0).kind is Kind.FORWARD
+    for access in (Authority.OWNER, Authority.PLAN, Authority.LEASE):
+        assert decide(access, 255, 190, book, 0.0).kind is Action.FORWARD
 
 
 def test_during_a_return_the_owners_stale_commands_are_refused_as_expired():
-    d = decide(Access.LEASE, 255, 190, returning(255), 2.0)
-    assert d.kind is Kind.REFUSE and d.result == rl.MAV_RESULT_DENIED
+    d = decide(Authority.LEASE, 255, 190, returning(255), 2.0)
+    assert d.kind is Action.REFUSE and d.result == rl.MAV_RESULT_DENIED
     assert "expired" in d.why and "the return holds lease" in d.why
-    assert decide(Access.MODE, 255, 190, returning(255), 2.0).kind is Kind.TAKE  # a mode change takes it back
+    assert decide(Authority.MODE, 255, 190, returning(255), 2.0).kind is Action.TAKE  # a mode change takes it back
 
 
 def test_during_a_return_a_stranger_cannot_take_over():
-    d = decide(Access.LEASE, 254, 190, returning(255), 2.0)
-    assert d.kind is Kind.REFUSE and "return in progress" in d.why
+    d = decide(Authority.LEASE, 254, 190, returning(255), 2.0)
+    assert d.kind is Action.REFUSE and "return in progress" in d.why
 
 
 def test_lease_text():

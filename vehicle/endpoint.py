@@ -36,7 +36,7 @@ from vehicle.services.telemetry import Telemetry
 Forward = Callable[[Any, Source, float], None]  # (message, source, t): what no service of the composition owns
 
 
-class Route(NamedTuple):
+class Dispatch(NamedTuple):
     """How ``Endpoint.handle`` treats one message type, worked out once per type rather than per frame."""
 
     handler: Callable[[Any, Source, float], None] | None  # the owning service's handler; None: nobody's
@@ -47,8 +47,8 @@ class Route(NamedTuple):
 # the target fields of every message of the dialect; anything else (UNKNOWN_n) has none
 TARGETS = {cls.msgname: ("target_system" in cls.fieldnames, "target_component" in cls.fieldnames)
            for cls in mav.mavlink_map.values()}
-NO_ROUTE = Route(None, False, False)
-__all__ = ["COMMANDS", "HANDLED", "Endpoint", "Forward", "Parts", "Route", "vehicle_services"]
+NO_DISPATCH = Dispatch(None, False, False)
+__all__ = ["COMMANDS", "HANDLED", "Endpoint", "Dispatch", "Forward", "Parts", "vehicle_services"]
 
 
 class Endpoint:
@@ -79,7 +79,7 @@ class Endpoint:
             composed.append(self.signing)
         self.commands = CommandServer(self.out, self.counters, composed, unknown=forward)
         self.services: list[Service] = [self.commands, *composed]
-        self.routes = _routes(self.services)
+        self.dispatch = _dispatch_table(self.services)
         self._ticks = [s.tick for s in self.services if ticks(s)]
 
     def service(self, cls: type) -> Any:
@@ -107,7 +107,7 @@ class Endpoint:
         """One message: counted, target-checked, signature-judged, then handed to the service that owns it.
 
         The type is asked once, the header read once, and the target fields and the handler come from a table per
-        message type (``routes``) instead of attribute probes per frame: the teleop stream is 10 Hz per station."""
+        message type (``dispatch``) instead of attribute probes per frame: the teleop stream is 10 Hz per station."""
         kind = m.get_type()
         if kind == "BAD_DATA":
             self.counters.bad_frames += 1
@@ -117,8 +117,8 @@ class Endpoint:
         if sender == self.sysid or sender == 0:
             return  # our own frames echoed back, or an anonymous sender
         self.counters.frames += 1
-        route = self.routes.get(kind, NO_ROUTE)
-        ours = self._for_us(m, route)
+        how = self.dispatch.get(kind, NO_DISPATCH)
+        ours = self._for_us(m, how)
         if not ours and self.forward is None:
             self.counters.wrong_target += 1
             return
@@ -133,7 +133,7 @@ class Endpoint:
                 self.sources[sender] = self._source
                 if self.signing.key is not None:
                     self.signed.add(sender)
-        handler = route.handler if ours else None
+        handler = how.handler if ours else None
         if handler is None:
             handler = self.forward
             if handler is None:
@@ -148,13 +148,13 @@ class Endpoint:
             self.counters.handler_faults += 1
             self.out.statustext(f"fault handling {kind}: {type(e).__name__}: {e}", mav.MAV_SEVERITY_ERROR)
 
-    def _for_us(self, m, route: Route) -> bool:
+    def _for_us(self, m, how: Dispatch) -> bool:
         """The target-id rules: 0 is everyone; a message without target fields is for whoever hears it."""
-        if route.target_system:
+        if how.target_system:
             ts = m.target_system
             if ts != 0 and ts != self.sysid:
                 return False
-        if route.target_component:
+        if how.target_component:
             tc = m.target_component
             return tc == 0 or tc == self.compid
         return True
@@ -215,7 +215,7 @@ class Endpoint:
 
     def owner(self, kind: str) -> Service | None:
         """The service that handles messages of type ``kind`` here (None: nobody; they go to ``forward``)."""
-        handler = self.routes.get(kind, NO_ROUTE).handler
+        handler = self.dispatch.get(kind, NO_DISPATCH).handler
         return None if handler is None else handler.__self__
 
 
@@ -225,7 +225,7 @@ def _parser():
     return parser
 
 
-def _routes(services: list[Service]) -> dict[str, Route]:
+def _dispatch_table(services: list[Service]) -> dict[str, Dispatch]:
     """Every message type of the dialect with its target fields and the one service that declared it."""
     owners: dict[str, Callable] = {}
     for service in services:
@@ -233,4 +233,4 @@ def _routes(services: list[Service]) -> dict[str, Route]:
             if kind in owners:
                 raise ValueError(f"{kind} is declared by two services")
             owners[kind] = MethodType(fn, service)
-    return {kind: Route(owners.get(kind), ts, tc) for kind, (ts, tc) in TARGETS.items()}
+    return {kind: Dispatch(owners.get(kind), ts, tc) for kind, (ts, tc) in TARGETS.items()}

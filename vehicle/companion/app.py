@@ -28,7 +28,7 @@ from link.signing import Key, SigningVerdict, Streams, sim_stamp
 from vehicle.app import Vehicle
 from vehicle.companion import router
 from vehicle.companion.autopilot import AutopilotDriver, is_autopilot_heartbeat, rover_problem
-from vehicle.companion.router import COMPANION_COMPID, Access, Decision, Dest, Kind
+from vehicle.companion.router import COMPANION_COMPID, Action, Authority, Decision, Dest
 from vehicle.companion.voice import GroundVoice, frame_msgid
 from vehicle.endpoint import Endpoint
 from vehicle.keystore import KeyStore, boot_stamp
@@ -169,7 +169,7 @@ class Companion:
         if trusted and v is not None:
             v.heard(sender, t, header.seq)
         if r.dest is Dest.MISDIRECTED:
-            self._refuse(m, Decision(Kind.REFUSE, apm.MAV_RESULT_DENIED, f"{router.what(m)} moves the robot: send "
+            self._refuse(m, Decision(Action.REFUSE, apm.MAV_RESULT_DENIED, f"{router.what(m)} moves the robot: send "
                                      f"it to the autopilot (component 1), not to the companion (191)"), sender, scomp,
                          t)
             return
@@ -179,41 +179,41 @@ class Companion:
             return
         if r.dest is not Dest.AUTOPILOT:
             return
-        d = self._decide(m, r.access, sender, scomp, t, trusted)
-        if d.kind is Kind.FORWARD:
+        d = self._decide(m, r.authority, sender, scomp, t, trusted)
+        if d.kind is Action.FORWARD:
             self.to_autopilot(raw)
             self.counters["forwarded"] += 1
-            if r.access is Access.MODE:
+            if r.authority is Authority.MODE:
                 self.mode_from_ground = True
             return
         self._refuse(m, d, sender, scomp, t)
 
-    def _decide(self, m, access: Access, sender: int, scomp: int, t: float, trusted: bool) -> Decision:
+    def _decide(self, m, access: Authority, sender: int, scomp: int, t: float, trusted: bool) -> Decision:
         """The router's decision, with the vehicle asked where the native endpoint asks it (admit, take_manual)."""
-        if access is Access.READ:
+        if access is Authority.READ:
             return router.FORWARD
         v = self.vehicle
         if v is None:
-            return Decision(Kind.REFUSE, apm.MAV_RESULT_TEMPORARILY_REJECTED,
+            return Decision(Action.REFUSE, apm.MAV_RESULT_TEMPORARILY_REJECTED,
                             "the companion is starting (waiting for the autopilot's position estimate)")
         if self.autopilot_lost:
-            return Decision(Kind.REFUSE, apm.MAV_RESULT_TEMPORARILY_REJECTED,
+            return Decision(Action.REFUSE, apm.MAV_RESULT_TEMPORARILY_REJECTED,
                             f"{self.autopilot_name} is not answering")
         keyed = self.key is not None
         d = router.decide(access, sender, scomp, v.book, t, trusted=trusted, keyed=keyed)
-        if d.kind is Kind.ADMIT:
+        if d.kind is Action.ADMIT:
             v.admit(sender, scomp, t)
             d = router.decide(access, sender, scomp, v.book, t, trusted=trusted, keyed=keyed)
-            if d.kind is Kind.ADMIT:  # (cannot happen: the grant was just decided possible)
-                d = Decision(Kind.REFUSE, apm.MAV_RESULT_DENIED, "not granted")
-        if d.kind is Kind.TAKE:
+            if d.kind is Action.ADMIT:  # (cannot happen: the grant was just decided possible)
+                d = Decision(Action.REFUSE, apm.MAV_RESULT_DENIED, "not granted")
+        if d.kind is Action.TAKE:
             chk = v.take_manual(sender, scomp, t)
             if chk.executes:
                 return router.FORWARD
             reason = chk.reason or router.RejectReason.INVALID
-            return Decision(Kind.REFUSE, router.REJECT_RESULT[reason],
+            return Decision(Action.REFUSE, router.REJECT_RESULT[reason],
                             f"{chk.detail or reason.value}; {router.lease_text(v.book)}")
-        if d.kind is Kind.REFUSE and self.vehicle is not None:
+        if d.kind is Action.REFUSE and self.vehicle is not None:
             self.vehicle.commands_rejected += 1  # (take_manual counts its own refusals)
         return d
 

@@ -55,7 +55,7 @@ def fail(message: str) -> int:
     return 2
 
 
-class Shell:
+class CompanionLoop:
     """The two links and the companion, served on the wall clock."""
 
     def __init__(self, autopilot, companion_factory) -> None:
@@ -188,7 +188,7 @@ def run(args: argparse.Namespace) -> int:
                          stamp=lambda t: stamp_from_unix(time.time()), boot_epoch=epochs.boot,
                          param_file=param_file, on_epoch=epochs.issued, autopilot_name=ap_conn.text)
 
-    shell = Shell(ap, build)
+    shell = CompanionLoop(ap, build)
     c = shell.companion
     heard = shell.run_for(args.wait, lambda: c.driver.seen.sysid is not None and c.driver.seen.mode is not None)
     if not heard:
@@ -223,7 +223,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _announce(shell: Shell, ap_text: str, gcs_text: str, keystore) -> None:
+def _announce(shell: CompanionLoop, ap_text: str, gcs_text: str, keystore) -> None:
     """The banner, and a warning (stderr and STATUSTEXT) if the backstop is not set up."""
     c = shell.companion
     d = c.driver.seen
@@ -242,7 +242,7 @@ def _announce(shell: Shell, ap_text: str, gcs_text: str, keystore) -> None:
         c.notice(0, "backstop", f"companion backstop not set up: {names}", c.t)
 
 
-def _configure(shell: Shell, configure: bool) -> int:
+def _configure(shell: CompanionLoop, configure: bool) -> int:
     names = [r.need.name for r in check({})]
     rows = check(shell.read_params(names))
     if not configure:

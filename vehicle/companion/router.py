@@ -5,7 +5,7 @@ vehicle does in its own code: every state change must come from the owner under 
 cannot change the autopilot, so it decides per frame, the way mavlink-router decides per frame where to send it:
 
 * ``route`` says where a ground frame goes (the companion's own endpoint, the autopilot, nowhere) and how much
-  authority it needs there (``Access``), from the message alone;
+  authority it needs there (``Authority``), from the message alone;
 * ``decide`` weighs that against the lease book (an immutable value) and answers FORWARD, REFUSE, or ask the
   vehicle first (ADMIT: a plain client may be granted the root; TAKE: a mode change takes the operator lease
   back), the same three paths the native endpoint takes through ``Vehicle.admit`` and ``Vehicle.take_manual``;
@@ -58,7 +58,7 @@ class Dest(enum.Enum):
     ELSEWHERE = "elsewhere"  # addressed to another system or component: dropped
 
 
-class Access(enum.Enum):
+class Authority(enum.Enum):
     """How much authority a frame for the autopilot needs (the native endpoint's levels)."""
 
     READ = "read"  # parameter and mission download, single-message requests, time sync: anyone
@@ -68,9 +68,9 @@ class Access(enum.Enum):
     MODE = "mode"  # mode changes: the owner takes the operator lease (``Vehicle.take_manual``)
 
 
-class Route(NamedTuple):
+class Routing(NamedTuple):
     dest: Dest
-    access: Access = Access.READ
+    authority: Authority = Authority.READ
 
 
 READ_MESSAGES = frozenset((
@@ -100,7 +100,7 @@ ROBOT_MESSAGES = frozenset(("SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGE
 ROBOT_COMMANDS = frozenset((apm.MAV_CMD_COMPONENT_ARM_DISARM,))
 
 
-def route(m, sysid: int) -> Route:
+def route(m, sysid: int) -> Routing:
     """Where the ground frame ``m`` goes and the authority it needs, for the vehicle whose autopilot is ``sysid``.
 
     To the companion: what is addressed to component 191, and returnlink's own commands sent to every component
@@ -109,45 +109,45 @@ def route(m, sysid: int) -> Route:
     mission upload is the autopilot's business, and two answers to one request confuse ground stations."""
     kind = m.get_type()
     if kind in KEEP_MESSAGES:
-        return Route(Dest.KEEP)
+        return Routing(Dest.KEEP)
     if kind == "SETUP_SIGNING":
-        return Route(Dest.SIGNING)
+        return Routing(Dest.SIGNING)
     target_system = _field(m, "target_system", "target")
     if target_system not in (None, 0, sysid):
-        return Route(Dest.ELSEWHERE)
+        return Routing(Dest.ELSEWHERE)
     target_component = _field(m, "target_component")
     command = m.command if kind in COMMANDS else None
     if target_component == COMPANION_COMPID:
-        return Route(Dest.MISDIRECTED if kind in ROBOT_MESSAGES or command in ROBOT_COMMANDS else Dest.COMPANION)
+        return Routing(Dest.MISDIRECTED if kind in ROBOT_MESSAGES or command in ROBOT_COMMANDS else Dest.COMPANION)
     if command in OWN_COMMANDS and target_component in (None, 0):
-        return Route(Dest.COMPANION)
+        return Routing(Dest.COMPANION)
     if target_component not in (None, 0, AUTOPILOT_COMPID):
-        return Route(Dest.ELSEWHERE)  # a camera, a gimbal, another companion: not on this wire's far side
-    return Route(Dest.AUTOPILOT, access(m))
+        return Routing(Dest.ELSEWHERE)  # a camera, a gimbal, another companion: not on this wire's far side
+    return Routing(Dest.AUTOPILOT, authority(m))
 
 
-def access(m) -> Access:
+def authority(m) -> Authority:
     """The authority a frame for the autopilot needs; anything not listed changes state under the lease."""
     kind = m.get_type()
     if kind in COMMANDS:
         c = m.command
         if c in READ_COMMANDS:
-            return Access.READ
+            return Authority.READ
         if c in OWNER_COMMANDS:
-            return Access.OWNER
-        return Access.MODE if c in MODE_COMMANDS else Access.LEASE
+            return Authority.OWNER
+        return Authority.MODE if c in MODE_COMMANDS else Authority.LEASE
     if kind in READ_MESSAGES:
-        return Access.READ
+        return Authority.READ
     if kind in OWNER_MESSAGES:
-        return Access.OWNER
+        return Authority.OWNER
     if kind in PLAN_MESSAGES:
-        return Access.PLAN
+        return Authority.PLAN
     if kind == "SET_MODE":
-        return Access.MODE
+        return Authority.MODE
     if kind == "FILE_TRANSFER_PROTOCOL":
         payload = bytes(m.payload)
-        return Access.READ if len(payload) > 3 and payload[3] in ftp.READS else Access.PLAN
-    return Access.LEASE
+        return Authority.READ if len(payload) > 3 and payload[3] in ftp.READS else Authority.PLAN
+    return Authority.LEASE
 
 
 def _field(m, *names: str) -> int | None:
@@ -159,7 +159,7 @@ def _field(m, *names: str) -> int | None:
 
 
 # ----- decisions -----------------------------------------------------------------------------------------------
-class Kind(enum.Enum):
+class Action(enum.Enum):
     FORWARD = "forward"  # to the autopilot
     REFUSE = "refuse"  # answered (``result``, None: not acknowledged) and announced (``why``)
     ADMIT = "admit"  # grant the sender the root first (LEASE_AUTOGRANT), then decide again
@@ -167,49 +167,49 @@ class Kind(enum.Enum):
 
 
 class Decision(NamedTuple):
-    kind: Kind
+    kind: Action
     result: int | None = None  # MAV_RESULT of the COMMAND_ACK a refused command gets (None: no acknowledgement)
     why: str = ""
 
 
-FORWARD = Decision(Kind.FORWARD)
+FORWARD = Decision(Action.FORWARD)
 
 
-def decide(access_: Access, sender: int, scomp: int, book: LeaseBook, t: float, *, trusted: bool = True,
+def decide(access_: Authority, sender: int, scomp: int, book: LeaseBook, t: float, *, trusted: bool = True,
            keyed: bool = False) -> Decision:
     """What to do with a frame for the autopilot from ``sender`` needing ``access_``, under ``book``.
 
     ``keyed``: a signing key is installed, and ``trusted``: this frame is signed with it (docs/architecture.md
     §4.1): then an unsigned state change is refused without an acknowledgement (a forged frame with the owner's sysid
     must not make the companion answer the owner's own pending command) and no plain client is ever granted the root."""
-    if access_ is Access.READ:
+    if access_ is Authority.READ:
         return FORWARD
     if keyed and not trusted:
-        return Decision(Kind.REFUSE, None, "not signed with the vehicle's key")
+        return Decision(Action.REFUSE, None, "not signed with the vehicle's key")
     owner = book.owner
-    if access_ is Access.MODE:
-        return Decision(Kind.TAKE)
+    if access_ is Authority.MODE:
+        return Decision(Action.TAKE)
     grantable = not keyed and sender != owner and book.admit(sender, scomp, t).book.owner == sender
-    if access_ is Access.OWNER:
+    if access_ is Authority.OWNER:
         return FORWARD if owner is None or owner == sender else _not_owner(book)
-    if access_ is Access.PLAN:
+    if access_ is Authority.PLAN:
         if grantable:
-            return Decision(Kind.ADMIT)
+            return Decision(Action.ADMIT)
         return FORWARD if owner is None or owner == sender else _not_owner(book)
     chk = book.check(sender)
     if chk.verdict is Verdict.EXECUTE:
         return FORWARD
     if grantable:
-        return Decision(Kind.ADMIT)
+        return Decision(Action.ADMIT)
     if chk.verdict is Verdict.QUEUE:  # the autopilot has no queue: a command for a later lease is not sent
-        return Decision(Kind.REFUSE, rl.MAV_RESULT_TEMPORARILY_REJECTED,
+        return Decision(Action.REFUSE, rl.MAV_RESULT_TEMPORARILY_REJECTED,
                         f"{chk.lease} is scheduled, not current; {lease_text(book)}")
     reason = chk.reason or RejectReason.INVALID
-    return Decision(Kind.REFUSE, REJECT_RESULT[reason], f"{chk.detail or reason.value}; {lease_text(book)}")
+    return Decision(Action.REFUSE, REJECT_RESULT[reason], f"{chk.detail or reason.value}; {lease_text(book)}")
 
 
 def _not_owner(book: LeaseBook) -> Decision:
-    return Decision(Kind.REFUSE, rl.MAV_RESULT_NOT_IN_CONTROL, f"GCS {book.owner} is in control; {lease_text(book)}")
+    return Decision(Action.REFUSE, rl.MAV_RESULT_NOT_IN_CONTROL, f"GCS {book.owner} is in control; {lease_text(book)}")
 
 
 def lease_text(book: LeaseBook | None) -> str:
