@@ -244,6 +244,7 @@ class _Reader:
 
 
 def parse(text: str, file: str = "<scenario>") -> Scenario:
+    """A scenario from TOML text; ScenarioError (file, line, field) for anything wrong. One part per table."""
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -260,6 +261,19 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
     seed = r.get(raw, "seed", "seed", int, 1)
     if not 0 <= seed <= SEED_MAX:
         raise r.fail("seed", f"must be within 0..{SEED_MAX}, got {seed}")
+    bounds, walls, denied, stations = _world(r, raw)
+    op = _operator(r, raw, stations)
+    return Scenario(
+        name=name, description=r.get(raw, "description", "description", str, ""), file=file,
+        duration=r.number(raw, "duration", "duration", lo=1.0, hi=36000.0),
+        seed=seed, vehicle=vehicle, bounds=bounds, walls=walls, denied=denied, stations=stations,
+        radio=_radio(r, raw), start=_start(r, raw), **op, events=_events(r, raw, stations),
+        criteria=_criteria(r, raw),
+    )
+
+
+def _world(r: _Reader, raw: dict) -> tuple[tuple[float, ...], tuple[Wall, ...], tuple, tuple[Station, ...]]:
+    """[world]: bounds, walls, radio-denied zones and ground stations."""
     world = r.table(raw, "world", "world", ("bounds", "walls", "denied", "stations"))
     b = r.get(world, "bounds", "world.bounds", list)
     if len(b) != 4 or not all(isinstance(c, (int, float)) for c in b) or b[0] >= b[2] or b[1] >= b[3]:
@@ -286,6 +300,11 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
                                 r.number(s, "power_dbm", f"{p}.power_dbm", 20.0, -30.0, 40.0)))
     if not stations:
         raise r.fail("world.stations", "needs at least one ground station")
+    return tuple(float(c) for c in b), tuple(walls), denied, tuple(stations)
+
+
+def _radio(r: _Reader, raw: dict) -> RadioParams:
+    """[radio]: the radio model's parameters (any left out keep their defaults)."""
     radio_raw = r.table(raw, "radio", "radio", RadioParams.__dataclass_fields__, {})
     radio_kw = {}
     for fname in RadioParams.__dataclass_fields__:
@@ -293,9 +312,19 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
             flag = isinstance(getattr(RadioParams, fname), bool)  # an option (reorder), not a number
             radio_kw[fname] = (r.get(radio_raw, fname, f"radio.{fname}", bool) if flag
                                else r.number(radio_raw, fname, f"radio.{fname}"))
+    return RadioParams(**radio_kw)
+
+
+def _start(r: _Reader, raw: dict) -> tuple[float, float, float]:
+    """[start]: where the robot boots, and its heading."""
     start_raw = r.table(raw, "start", "start", ("position", "yaw_deg"))
     sx, sy = r.point(r.get(start_raw, "position", "start.position", list), "start.position")
-    syaw = math.radians(r.number(start_raw, "yaw_deg", "start.yaw_deg", 0.0, -360, 360))
+    return sx, sy, math.radians(r.number(start_raw, "yaw_deg", "start.yaw_deg", 0.0, -360, 360))
+
+
+def _operator(r: _Reader, raw: dict, stations: tuple[Station, ...]) -> dict:
+    """[operator]: the scripted operator's station, teleop kind, route, attempts, return plan and parameters (the
+    Scenario fields they fill, by name)."""
     op = r.table(raw, "operator", "operator", ("station", "teleop", "route", "resume_route", "plan", "params",
                                                   "attempts"))
     op_station = r.get(op, "station", "operator.station", str, stations[0].name)
@@ -312,6 +341,15 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
     for p in (*route, *resume):
         if not 0 < p[2] <= 5:
             raise r.fail("operator.route", f"speed must be in (0, 5] m/s, got {p[2]}")
+    params_raw = r.get(op, "params", "operator.params", dict, {})
+    params = {k: _param(r, k, r.number(params_raw, k, f"operator.params.{k}"), f"operator.params.{k}")
+              for k in params_raw}
+    return {"operator_station": op_station, "teleop": teleop, "route": route, "resume_route": resume,
+            "attempts": attempts, "plan": _plan(r, op), "params": params}
+
+
+def _plan(r: _Reader, op: dict) -> tuple[PlanItem, ...]:
+    """operator.plan: the return plan, each item checked against the one table of plan-item ranges."""
     plan = []
     for k, it in enumerate(r.get(op, "plan", "operator.plan", list, [])):
         p = f"operator.plan[{k}]"
@@ -334,9 +372,11 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
         else:
             plan.append(PlanItem(num))
         _check_plan_item(r, plan[-1], p)
-    params_raw = r.get(op, "params", "operator.params", dict, {})
-    params = {k: _param(r, k, r.number(params_raw, k, f"operator.params.{k}"), f"operator.params.{k}")
-              for k in params_raw}
+    return tuple(plan)
+
+
+def _events(r: _Reader, raw: dict, stations: tuple[Station, ...]) -> tuple[Event, ...]:
+    """[[events]]: timed events, in time order."""
     events = []
     for k, ev in enumerate(r.tables(raw, "events", "events", ("t", "action", "duration", "station", "name",
                                                                 "value"))):
@@ -353,6 +393,11 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
         if action == "param":
             _param(r, event.name, event.value, f"{p}.name")
         events.append(event)
+    return tuple(sorted(events, key=lambda e: e.t))
+
+
+def _criteria(r: _Reader, raw: dict) -> Criteria:
+    """[criteria]: what a run must show to pass."""
     crit_raw = r.table(raw, "criteria", "criteria", Criteria.__dataclass_fields__, {})
     reasons = r.get(crit_raw, "chain_reasons", "criteria.chain_reasons", list, [])
     for reason in reasons:
@@ -372,15 +417,7 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
     )
     if crit.regained_by is not None and crit.regained_by not in REGAINED_BY:
         raise r.fail("criteria.regained_by", f"must be one of {', '.join(REGAINED_BY)}, got {crit.regained_by!r}")
-    return Scenario(
-        name=name, description=r.get(raw, "description", "description", str, ""), file=file,
-        duration=r.number(raw, "duration", "duration", lo=1.0, hi=36000.0),
-        seed=seed, vehicle=vehicle, bounds=tuple(float(c) for c in b),
-        walls=tuple(walls), denied=denied, stations=tuple(stations), radio=RadioParams(**radio_kw),
-        start=(sx, sy, syaw), operator_station=op_station, teleop=teleop, route=route, resume_route=resume,
-        attempts=attempts,
-        plan=tuple(plan), params=params, events=tuple(sorted(events, key=lambda e: e.t)), criteria=crit,
-    )
+    return crit
 
 
 def _check_plan_item(r: _Reader, item: PlanItem, path: str) -> None:
