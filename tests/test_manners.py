@@ -7,12 +7,13 @@ import struct
 
 from pymavlink.dialects.v20 import development as dev
 
+from link.ftp import ERR_FILE_NOT_FOUND
+from link.ftp import OP_NAK as FTP_NAK
+from link.ftp import OP_OPEN_FILE_RO as FTP_OPEN_FILE_RO
 from tests.harness import Pair
 from vehicle.modes import AVAILABLE_MODES, PX4_AUTO, PX4_AUTO_LOITER, PX4_AUTO_RTL, PX4_POSCTL
 from vehicle.params import SPECS
 from vehicle.services.base import mav
-
-FTP_OPEN_FILE_RO, FTP_NAK, FTP_ERR_UNKNOWN_COMMAND = 4, 129, 7
 
 
 def sent(pair: Pair, kind: str) -> list:
@@ -28,7 +29,8 @@ def sent(pair: Pair, kind: str) -> list:
 
 
 def test_ftp_request_is_answered_with_a_nak_at_once():
-    """MAVProxy asks for @PARAM/param.pck over FTP at connect; a NAK makes it use the parameter protocol now."""
+    """MAVProxy asks for @PARAM/param.pck over FTP at connect; a NAK (the vehicle offers no such file) makes it use
+    the parameter protocol now."""
     pair = Pair()
     pair.step(0.1)
     req = struct.pack("<HBBBBBBI", 41, 3, FTP_OPEN_FILE_RO, 11, 0, 0, 0, 0) + b"@PARAM/param.pck"
@@ -42,7 +44,7 @@ def test_ftp_request_is_answered_with_a_nak_at_once():
     seq, session, opcode, size, req_opcode = struct.unpack_from("<HBBBB", bytes(m.payload))
     assert (m.target_system, m.target_component) == (255, 190)
     assert (seq, session, opcode, size, req_opcode) == (42, 3, FTP_NAK, 1, FTP_OPEN_FILE_RO)
-    assert bytes(m.payload)[12] == FTP_ERR_UNKNOWN_COMMAND
+    assert bytes(m.payload)[12] == ERR_FILE_NOT_FOUND
 
 
 def test_ftp_answers_are_never_answered():
