@@ -218,6 +218,15 @@ class Client:
     def clear(self, mission_type: int = 0, timeout: float = 6.0) -> None:
         self._transfer(self.gs.clear(mission_type), timeout, "plan clear")
 
+    # ----- files ---------------------------------------------------------------------------------------------
+    def fetch(self, path: str, timeout: float = 30.0) -> bytes:
+        """The vehicle's file ``path`` (MAVLink FTP), whole; GcsError naming why if it cannot be had."""
+        d = self.gs.fetch(path)
+        self.wait_for(lambda: d.done, timeout, f"file {path}")
+        if not d.ok:
+            raise GcsError(f"file {path}: {d.error}")
+        return bytes(d.data)
+
     # ----- parameters ----------------------------------------------------------------------------------------
     def param_get(self, name: str, timeout: float = 3.0) -> float:
         since = self.now

@@ -20,6 +20,7 @@ from typing import TextIO
 from gcs.client import Client, GcsError
 from gcs.plans import PlanError, describe, parse_spec, read_wpl, write_wpl
 from link import args as types
+from link.storage import write_atomic
 
 
 class UsageError(Exception):
@@ -287,6 +288,18 @@ def _param_save(ctx, a):
     _say(ctx, f"saved {n} parameters to {a.file}")
 
 
+def _file_get(ctx, a):
+    data = ctx.client.fetch(a.name)
+    if a.file:
+        try:
+            write_atomic(a.file, data)
+        except OSError as e:
+            raise UsageError(f"cannot write {a.file}: {e.strerror or e}") from None
+        _say(ctx, f"saved {len(data)} bytes of {a.name} to {a.file}")
+    else:
+        ctx.out.write(data.decode("utf-8", "replace"))
+
+
 def _args(*specs: tuple[tuple, dict]) -> Callable[[argparse.ArgumentParser], None]:
     def add(p: argparse.ArgumentParser) -> None:
         for names, kw in specs:
@@ -320,6 +333,8 @@ COMMANDS: tuple[Command, ...] = (
             _args((("file",), {"nargs": "?"}))),
     Command("plan show", "show a plan file or spec without a vehicle", _plan_show, _plan_file_args, vehicle=False),
     Command("plan clear", "clear the plan (the default plan applies)", _plan_clear),
+    Command("file get", "fetch a file the vehicle offers (linkmap.csv: its link map) to FILE, or print it",
+            _file_get, _args((("name",), {}), (("file",), {"nargs": "?"}))),
     Command("param get", "one parameter, or all", _param_get, _args((("name",), {"nargs": "?"}))),
     Command("param set", "set a parameter", _param_set,
             _args((("name",), {}), (("value",), {"type": types.number("value")}))),

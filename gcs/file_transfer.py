@@ -78,10 +78,10 @@ class FileClient:
 
     def _opened(self, d: Download, p: ftp.Packet) -> None:
         if p.opcode == ftp.OP_NAK:
-            self._fail(f"{d.path}: {ftp.ERRORS.get(p.error or 0, 'refused')}")
+            self._fail(f"{ftp.ERRORS.get(p.error or 0, 'refused')}")
             return
         if len(p.data) < 4:
-            self._fail(f"{d.path}: the open carried no size")
+            self._fail("the open carried no size")
             return
         d.session, d.size = p.session, struct.unpack_from("<I", p.data)[0]
         self._next_read(d)
@@ -91,10 +91,10 @@ class FileClient:
             if p.error == ftp.ERR_EOF:
                 self._finish(d)
             else:
-                self._fail(f"{d.path}: {ftp.ERRORS.get(p.error or 0, 'refused')} at byte {len(d.data)}")
+                self._fail(f"{ftp.ERRORS.get(p.error or 0, 'refused')} at byte {len(d.data)}")
             return
         if p.offset != len(d.data) or not p.data:
-            self._fail(f"{d.path}: data for byte {p.offset} when byte {len(d.data)} was asked")
+            self._fail(f"data for byte {p.offset} when byte {len(d.data)} was asked")
             return
         d.data += p.data
         self._next_read(d)
@@ -107,7 +107,7 @@ class FileClient:
 
     def _finish(self, d: Download) -> None:
         if d.size is not None and len(d.data) != d.size:
-            self._fail(f"{d.path}: {len(d.data)} bytes of {d.size}")
+            self._fail(f"{len(d.data)} bytes of {d.size}")
             return
         self._send(ftp.OP_TERMINATE_SESSION, session=d.session or 0)
         d.done = True  # the file is whole; the session's end is a courtesy, not waited for

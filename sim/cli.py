@@ -59,8 +59,8 @@ def _writable_dir(out: Path) -> None:
 def _parm_file(path: str | None) -> Path | None:
     """A .parm file to boot from is checked before anything runs, as strictly as the vehicle reads it at boot
     (an empty or cut-short file too): errors by file and line, exit 2."""
+    from link.storage import StoredFileError
     from vehicle.params import read_parm_file
-    from vehicle.storage import StoredFileError
 
     if path is None:
         return None
@@ -208,11 +208,11 @@ def _cmd_sim_replay(args: argparse.Namespace) -> int:
     from dataclasses import replace
     from pathlib import Path
 
+    from link.storage import StoredFileError
     from sim import outputs
     from sim.campaign.store import JSON_METRICS, TRIALS_FILE, read_rows
     from sim.campaign.trial import same_metrics, simulate, trial_from_row
     from sim.policies import FIRMWARE_VEHICLE
-    from vehicle.storage import StoredFileError
 
     if args.scenario or args.param or args.plan is not None or args.seed is not None or args.vehicle:
         return _usage_error("--replay takes every input from the stored trial; give no SCENARIO, --seed, "
@@ -296,9 +296,9 @@ def _cmd_sim_sweep(args: argparse.Namespace) -> int:
         os.environ[ENV] = firmware  # for workers that run a stored trial again (a resumed or retried one)
         spec = replace(spec, trials=tuple(replace(t, firmware=firmware) for t in spec.trials))
     out = Path(args.out) if args.out else Path("out") / f"sweep-{Path(args.spec).stem}"
+    from link.storage import StoredFileError
     from sim.campaign import sweep
     from sim.campaign.executors import RayExecutor, SerialExecutor
-    from vehicle.storage import StoredFileError
 
     try:
         store = sweep.Store(out)
@@ -384,9 +384,9 @@ def _cmd_sim_serve_firmware(args: argparse.Namespace, sc) -> int:
 
 
 def _cmd_sim_serve(args: argparse.Namespace) -> int:
+    from link.storage import StoredFileError
     from sim.policies import FIRMWARE_VEHICLE
     from sim.serve import Server
-    from vehicle.storage import StoredFileError
 
     sc = _scenario(args.scenario)
     if args.vehicle == FIRMWARE_VEHICLE:

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from link.radio import subsystem_rng
+from link.storage import remove_leftovers
 from sim.robots import Robot, make_robot
 from sim.scenario import Scenario
 from sim.sensors import Sensors
@@ -20,7 +21,6 @@ from vehicle.app import Contingency, Vehicle
 from vehicle.endpoint import Endpoint
 from vehicle.io import Readings
 from vehicle.params import load_defaults
-from vehicle.storage import remove_leftovers
 
 
 class SimDriver:

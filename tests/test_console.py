@@ -140,7 +140,7 @@ def test_one_shot_and_shell_share_one_command_table():
             continue
         words = c.path.split() + {"drive": ["1", "0", "1"], "manual": ["0.5", "0", "1"], "claim": [],
                                   "param set": ["LNK_TIMEOUT", "5"], "param load": ["f"], "param save": ["f"],
-                                  "wait": ["1"]}.get(c.path, [])
+                                  "wait": ["1"], "file get": ["linkmap.csv"]}.get(c.path, [])
         assert parser.parse_args(["gcs", *words]).command_path == c.path
 
 
@@ -171,6 +171,13 @@ def test_unknown_parameter_is_named_not_a_time_out(served, capsys):
     assert "unknown parameter 'NO_SUCH_PARAM'" in err and "timed out" not in err
     assert main([*url, "param", "set", "NO_SUCH_PARAM", "1"]) == 1
     assert "unknown parameter 'NO_SUCH_PARAM'" in capsys.readouterr().err
+
+
+def test_a_file_the_vehicle_does_not_offer_is_named_not_a_time_out(served, capsys):
+    url = ["gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}"]
+    assert main([*url, "file", "get", "@PARAM/param.pck"]) == 1
+    err = capsys.readouterr().err
+    assert "file @PARAM/param.pck: file not found" in err and "timed out" not in err
 
 
 def test_param_set_to_nan_is_reported_refused_not_done(served, capsys):

@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from link.storage import StoredFileError
 from sim.cli import main
 from sim.scenario import load
 from sim.serve import Server
@@ -16,7 +17,6 @@ from vehicle import epochs
 from vehicle.app import DT
 from vehicle.epochs import HEADER, EpochLog, Span, choose, clear_of
 from vehicle.services.base import mav
-from vehicle.storage import StoredFileError
 
 GCS = 255
 

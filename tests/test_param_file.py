@@ -12,9 +12,9 @@ from pathlib import Path
 
 import pytest
 
+from link.storage import StoredFileError, remove_leftovers
 from sim.cli import main
 from vehicle.params import SPECS, read_parm_file
-from vehicle.storage import StoredFileError, remove_leftovers
 
 # Saves the parameter file as the endpoint does on every accepted PARAM_SET, as fast as it can, alternating
 # two values; prints "saved" once the first save is on disk.

@@ -26,9 +26,9 @@ from link.signing import (
     stamp_from_unix,
     timestamp_of,
 )
+from link.storage import StoredFileError
 from tests.harness import Pair
 from vehicle.keystore import KeyStore, boot_stamp, read_key, stamp_path, write_key
-from vehicle.storage import StoredFileError
 
 mav = dialect.load()
 KEY = Key(bytes(range(32)))

@@ -7,7 +7,7 @@ import stat
 
 import pytest
 
-from vehicle.storage import StoredFileError, read_text, write_atomic
+from link.storage import StoredFileError, read_text, write_atomic
 
 
 def test_write_replaces_whole_file_and_leaves_no_temporary(tmp_path):

@@ -9,7 +9,7 @@ random source and keeps a small file of the epochs its recent boots issued (``FI
 while the new boot's range would come near one of them. Only the lockstep simulator derives its epoch from the seed,
 so that its runs repeat.
 
-The file is written with ``vehicle.storage.write_atomic`` each time an epoch is issued (before its ACK leaves) and
+The file is written with ``link.storage.write_atomic`` each time an epoch is issued (before its ACK leaves) and
 read strictly: a damaged file is a ``StoredFileError`` naming the line, and the vehicle does not start on it.
 """
 
@@ -20,7 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from vehicle.storage import StoredFileError, read_text, remove_leftovers, write_atomic
+from link.storage import StoredFileError, read_text, remove_leftovers, write_atomic
 
 SPACE = 0xFFFF  # epochs are 1..65535 and count up, 65535 wrapping to 1 (0 means "none" on the wire)
 HEADROOM = 1024  # epochs one boot may issue (acquisitions) before its range could near an earlier boot's

@@ -7,7 +7,7 @@ went backwards, every ground station would drop its frames as replays, and worse
 reboot would become replayable. So the timestamp is saved at least once a minute and at shutdown, and at boot the
 vehicle continues from max(saved + 1, clock).
 
-Both files are written with ``vehicle.storage.write_atomic`` and read strictly: a damaged file names itself and
+Both files are written with ``link.storage.write_atomic`` and read strictly: a damaged file names itself and
 its line (``StoredFileError``) and the vehicle refuses to start rather than run unsigned or with a guessed clock.
 Key parsing itself lives in ``link.signing`` so a ground station can read the same file without this package.
 """
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from link.signing import MAX_TIMESTAMP, Key, KeyFileError, format_key, parse_key
-from vehicle.storage import StoredFileError, read_text, write_atomic
+from link.storage import StoredFileError, read_text, write_atomic
 
 KEY_MODE = 0o600
 STAMP_SAVE_EVERY = 30.0  # s of vehicle time between timestamp saves: "at least once a minute", with margin

@@ -21,7 +21,7 @@ from link.parameters import (  # noqa: F401 - the table and the .parm format, re
     parse_parm,
     validate,
 )
-from vehicle.storage import StoredFileError, read_text, write_atomic
+from link.storage import StoredFileError, read_text, write_atomic
 
 DEFAULTS_FILE = Path(__file__).resolve().parent.parent / "params" / "returnlink.parm"
 

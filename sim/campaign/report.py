@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
+from link.storage import write_atomic
 from sim.campaign.store import FINISHED, format_table, rest_from_loss, summary, time_to_link
 from sim.plots import plt, save
-from vehicle.storage import write_atomic
 
 WORST = 10
 TABLE_COLUMNS = ["scenario", "vehicle", "policy", "params", "n", "errors", "pass_rate", "link_regained_rate",

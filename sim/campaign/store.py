@@ -21,8 +21,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from link.storage import StoredFileError, write_atomic
 from sim.campaign.trial import Trial
-from vehicle.storage import StoredFileError, write_atomic
 
 TRIALS_FILE = "trials.parquet"
 SUMMARY_FILE = "summary.csv"

@@ -154,10 +154,10 @@ def _epochs_path(params: str | None) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     from link.signing import stamp_from_unix
+    from link.storage import StoredFileError, remove_leftovers
     from vehicle.epochs import EpochLog
     from vehicle.keystore import KeyStore
     from vehicle.params import load_defaults
-    from vehicle.storage import StoredFileError, remove_leftovers
 
     try:
         ap_conn = parse_conn(args.autopilot)

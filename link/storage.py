@@ -1,5 +1,5 @@
-"""Files the vehicle keeps (parameters, signing key, signing timestamp, last epochs): written atomically, read
-strictly.
+"""Files kept on disk (a vehicle's parameters, key, timestamp and epochs; a station's downloads; results): written
+atomically, read strictly.
 
 A robot can lose power at any instant, and a half-written parameter file that boots with defaults silently loses
 every setting the operator made (docs/architecture.md §8). So every file is replaced by write -> fsync -> rename ->
