@@ -119,13 +119,13 @@ def _cmd_sim_run(args: argparse.Namespace) -> int:
         run = Run(sc, kind, seed, progress=not args.quiet, policy=policy).run()
     else:
         from sim.firmware.process import FirmwareError, stop_on_terminate
-        from sim.firmware.run import FirmwareRun
+        from sim.firmware.run import firmware_run
 
         print(f"returnlink: firmware {firmware}", file=sys.stderr)
         try:
             with stop_on_terminate():
-                run = FirmwareRun(sc, seed, policy, firmware, progress=not args.quiet,
-                                  log_path=out / "firmware.log").run()
+                run = firmware_run(sc, seed, policy, firmware, progress=not args.quiet,
+                                   log_path=out / "firmware.log").run()
         except FirmwareError as e:
             print(f"returnlink: the firmware failed: {e}", file=sys.stderr)
             return 1

@@ -33,9 +33,9 @@ from link.transports import LockstepBus
 from sim.firmware.lockstep import DT, MODE_NAMES, SKID_PARAMS, SPEEDUP, Lockstep
 from sim.firmware.operator import FirmwareOperator
 from sim.jams import Jams
+from sim.policies import COMPANION_POLICY, FAILSAFE_POLICIES
 from sim.robots import make_robot
 from sim.runner import TLOG_EPOCH_US
-from sim.policies import COMPANION_POLICY, FAILSAFE_POLICIES
 from sim.scenario import Scenario
 from vehicle.companion.setup import NEEDS
 
@@ -257,23 +257,26 @@ class FirmwareRun:
 
     def _events(self, t: float) -> None:
         while self.events and self.events[0].t <= t + 1e-9:
-            ev = self.events.pop(0)
-            st = self.stations.get(ev.station or self.scenario.operator_station)
-            if ev.action == "jam":
-                self.jams.jam(ev.t, ev.duration, ev.station)
-            elif ev.action == "unjam":
-                self.jams.unjam(t)
-            elif ev.action == "kill_gcs" and st is not None:
-                st.alive = False
-            elif ev.action == "revive_gcs" and st is not None:
-                st.alive = True
-            elif ev.action == "rtl" and st is not None and st.operator is not None:
-                st.operator.request_rtl(t)
-            elif ev.action == "stop":
-                self.stopped = True
-            else:
-                # leases, claims and returnlink parameters mean nothing to the firmware: said, not faked
-                self.notes.append(f"t={ev.t:g} s: event {ev.action!r} does not apply to the ArduPilot firmware")
+            self._event(self.events.pop(0), t)
+
+    def _event(self, ev, t: float) -> None:
+        """One timed event of the scenario, due now."""
+        st = self.stations.get(ev.station or self.scenario.operator_station)
+        if ev.action == "jam":
+            self.jams.jam(ev.t, ev.duration, ev.station)
+        elif ev.action == "unjam":
+            self.jams.unjam(t)
+        elif ev.action == "kill_gcs" and st is not None:
+            st.alive = False
+        elif ev.action == "revive_gcs" and st is not None:
+            st.alive = True
+        elif ev.action == "rtl" and st is not None and st.operator is not None:
+            st.operator.request_rtl(t)
+        elif ev.action == "stop":
+            self.stopped = True
+        else:
+            # leases, claims and returnlink parameters mean nothing to the firmware: said, not faked
+            self.notes.append(f"t={ev.t:g} s: event {ev.action!r} does not apply to the ArduPilot firmware")
 
     def _record(self, t: float, pos: tuple[float, float]) -> None:
         est = self.link.tap.estimate
