@@ -13,10 +13,12 @@ from pathlib import Path
 
 import pytest
 
+from gcs.station import mav
 from sim.campaign.spec import SpecError, load_spec, parse_spec
 from sim.cli import main
 from sim.firmware import companion_metrics
 from sim.firmware.companion import CompanionRun
+from sim.firmware.companion_operator import CompanionOperator
 from sim.firmware.metrics import differing
 from sim.firmware.process import INSTANCE_ENV
 from sim.firmware.run import firmware_params
@@ -148,3 +150,28 @@ def test_the_companion_policy_needs_the_firmware_vehicle(tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         main(["sim", "run", "tunnel", "--out", str(tmp_path / "o"), "--policy", "companion"])
     assert e.value.code == 2 and "use --vehicle ardurover" in capsys.readouterr().err
+
+
+class StubbornOperator(CompanionOperator):
+    """An operator who keeps sending GUIDED targets whatever the lease says (and uploads no plan)."""
+
+    def _follow_lease(self, t: float, st) -> None:
+        super()._follow_lease(t, st)
+        if st.state != mav.RETURNLINK_STATE_TELEOP:
+            self._step(t)
+
+
+class StubbornRun(CompanionRun):
+    def _make_operator(self, sc):
+        return StubbornOperator(sc.route, sc.resume_route, self.origin, [], sc.attempts)
+
+
+def test_commands_sent_during_the_return_are_refused_never_forwarded(firmware, instance_range):
+    """The router's authority in the world: what the operator sends while the return holds the lease never reaches
+    the firmware (the run's own audit of every forwarded frame finds none), and the return still brings the link
+    back."""
+    run = StubbornRun(load("tunnel"), 1, firmware=firmware, duration=DURATION).run()
+    m = companion_metrics.compute(run)
+    assert run.audit_stale == 0 and m["stale_commands_executed"] == 0
+    assert m["commands_rejected"] > 20 and run.companion.counters["refused"] > 20
+    assert m["regained_by"] == "return" and m["blocks"][0]["reason"] == "LINK_REGAINED"
