@@ -44,7 +44,7 @@ from vehicle.params import load_defaults
 
 # what a forwarded frame needs to be audited: it changes the robot's state under a lease
 _AUDITED = frozenset((router.Access.LEASE, router.Access.MODE))
-_COMPID_AT = 6  # byte of a MAVLink 2 frame that holds its sender's component id
+_COMPID_AT = {0xFD: 6, 0xFE: 4}  # MAVLink 2 / 1 start byte -> the byte that holds the sender's component id
 
 
 class CompanionRun(LeaseRecord, FirmwareRun):
@@ -103,7 +103,8 @@ class CompanionRun(LeaseRecord, FirmwareRun):
 
     def _to_autopilot(self, data: bytes) -> None:
         """The companion's wire to the firmware; a ground frame it forwards is audited on the way."""
-        if len(data) > _COMPID_AT and data[0] == 0xFD and data[_COMPID_AT] != router.COMPANION_COMPID:
+        at = _COMPID_AT.get(data[0]) if data else None
+        if at is not None and len(data) > at and data[at] != router.COMPANION_COMPID:
             self.forwarded += 1
             self._audit_forwarded(data)
         self.link.send(data)
