@@ -20,8 +20,8 @@ from sim.firmware import companion_metrics
 from sim.firmware.companion import CompanionRun
 from sim.firmware.companion_operator import CompanionOperator
 from sim.firmware.metrics import differing
-from sim.firmware.process import INSTANCE_ENV
-from sim.firmware.run import firmware_params
+from sim.firmware.process import INSTANCE_ENV, MAX_INSTANCE, FirmwareError, claim_instance
+from sim.firmware.run import FirmwareRun, firmware_params, firmware_run
 from sim.policies import flies
 from sim.scenario import load
 from tests.firmware_helpers import firmware_or_skip, short_scenario
@@ -175,3 +175,23 @@ def test_commands_sent_during_the_return_are_refused_never_forwarded(firmware, i
     assert run.audit_stale == 0 and m["stale_commands_executed"] == 0
     assert m["commands_rejected"] > 20 and run.companion.counters["refused"] > 20
     assert m["regained_by"] == "return" and m["blocks"][0]["reason"] == "LINK_REGAINED"
+
+
+def test_each_run_class_flies_only_its_own_policies(firmware):
+    sc = load("tunnel")
+    with pytest.raises(ValueError, match="companion"):
+        FirmwareRun(sc, 1, "companion", firmware)  # the firmware alone has no companion to fly it with
+    with pytest.raises(ValueError, match="ardupilot-hold"):
+        CompanionRun(sc, 1, "ardupilot-hold", firmware)
+    assert isinstance(firmware_run(sc, 1, "companion", firmware), CompanionRun)
+    assert type(firmware_run(sc, 1, "ardupilot-hold", firmware)) is FirmwareRun
+
+
+def test_the_instance_variable_says_where_the_search_starts(monkeypatch):
+    monkeypatch.setenv(INSTANCE_ENV, "57")
+    n, sock = claim_instance()
+    sock.close()
+    assert 57 <= n <= MAX_INSTANCE
+    monkeypatch.setenv(INSTANCE_ENV, "forty")
+    with pytest.raises(FirmwareError, match=INSTANCE_ENV):
+        claim_instance()
