@@ -80,9 +80,9 @@ def _policy_for(args: argparse.Namespace, kind: str) -> str:
     policy = args.policy or (DEFAULT_FIRMWARE_POLICY if kind == FIRMWARE_VEHICLE else DEFAULT_POLICY)
     if not flies(policy, kind):
         if kind == FIRMWARE_VEHICLE:
-            raise _fail(f"vehicle {kind} flies the ArduPilot firmware's own failsafes: --policy ardupilot-hold, "
-                        f"ardupilot-rtl or ardupilot-smartrtl (got {policy})")
-        raise _fail(f"policy {policy} is the ArduPilot firmware's own failsafe: use --vehicle {FIRMWARE_VEHICLE}")
+            raise _fail(f"vehicle {kind} flies the ArduPilot firmware's own failsafes or returnlink beside it: "
+                        f"--policy ardupilot-hold, ardupilot-rtl, ardupilot-smartrtl or companion (got {policy})")
+        raise _fail(f"policy {policy} needs the ArduPilot firmware: use --vehicle {FIRMWARE_VEHICLE}")
     return policy
 
 
@@ -119,13 +119,13 @@ def _cmd_sim_run(args: argparse.Namespace) -> int:
         run = Run(sc, kind, seed, progress=not args.quiet, policy=policy).run()
     else:
         from sim.firmware.process import FirmwareError, stop_on_terminate
-        from sim.firmware.run import FirmwareRun
+        from sim.firmware.run import firmware_run
 
         print(f"returnlink: firmware {firmware}", file=sys.stderr)
         try:
             with stop_on_terminate():
-                run = FirmwareRun(sc, seed, policy, firmware, progress=not args.quiet,
-                                  log_path=out / "firmware.log").run()
+                run = firmware_run(sc, seed, policy, firmware, progress=not args.quiet,
+                                   log_path=out / "firmware.log").run()
         except FirmwareError as e:
             print(f"returnlink: the firmware failed: {e}", file=sys.stderr)
             return 1
@@ -466,7 +466,7 @@ def _cmd_keys(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from sim.policies import DEFAULT_POLICY, FIRMWARE_POLICIES, POLICY_NAMES
+    from sim.policies import DEFAULT_POLICY, FAILSAFE_POLICIES, POLICY_NAMES
 
     p = argparse.ArgumentParser(
         prog="returnlink", description="Lease-based automated return to link for MAVLink robots.")
@@ -488,7 +488,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--policy", choices=POLICY_NAMES,
                      help=f"what the vehicle does when its link is lost: the scenario's plan ({DEFAULT_POLICY}, the "
                           "default), a baseline (docs/architecture.md §9), or with --vehicle ardurover the "
-                          "firmware's own failsafe (default ardupilot-smartrtl)")
+                          "firmware's own failsafe (default ardupilot-smartrtl) or companion: returnlink companion "
+                          "between the radio and the firmware (§11)")
     _add_firmware_option(run)
     _add_run_campaign_options(run)
     run.set_defaults(func=_cmd_sim_run)
@@ -497,7 +498,7 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("scenario", help="a built-in scenario name or a .toml file")
     serve.add_argument("--vehicle", choices=["rover", "legged", "ardurover"],
                        help="robot model (default: the scenario's); ardurover: the real ArduPilot firmware")
-    serve.add_argument("--policy", choices=FIRMWARE_POLICIES,
+    serve.add_argument("--policy", choices=FAILSAFE_POLICIES,
                        help="with --vehicle ardurover: its GCS failsafe (default ardupilot-smartrtl)")
     _add_firmware_option(serve)
     serve.add_argument("--seed", type=types.SEED)

@@ -84,8 +84,13 @@ def compute(run: Run) -> dict:
         elif first.target_true is not None:
             final_err = math.dist(first.end, first.target_true)
     true, est = np.array(tr.true), np.array(tr.est)
+    if len(est):  # a tick with no estimate yet (the companion before it boots) is not an error of one
+        known = np.isfinite(est).all(axis=1)
+        true, est = true[known], est[known]
     rmse = float(np.sqrt(np.mean(np.sum((true - est) ** 2, axis=1)))) if len(true) else 0.0
-    poly = np.vstack([v.trail.points(), [[v.estimator.pose.x, v.estimator.pose.y]]])
+    # the trail is in the vehicle's own frame, the trace in the true one: ``frame_offset`` is where the first lies
+    # in the second (none for the native vehicle, whose estimator starts at its true pose)
+    poly = np.vstack([v.trail.points(), [[v.estimator.pose.x, v.estimator.pose.y]]]) + np.asarray(run.frame_offset)
     deviation = path_deviation(est[::5], poly)
     m = {
         "scenario": sc.name, "vehicle": run.kind, "seed": run.seed, "sim_duration_s": _r(run.t, 2),

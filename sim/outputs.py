@@ -1,6 +1,7 @@
 """What every run leaves behind, whichever vehicle flew it: metrics.json, the operator's .tlog, the trajectory and
 timeline plots, and the printed summary. A native run (``sim.runner.Run``) and a firmware run
-(``sim.firmware.run.FirmwareRun``) each have their own metrics and plots; this is the one place that picks."""
+(``sim.firmware.run.FirmwareRun``), and returnlink companion beside the firmware (``sim.firmware.companion``) each
+have their own metrics and plots; this is the one place that picks."""
 
 from __future__ import annotations
 
@@ -10,6 +11,10 @@ from pathlib import Path
 def _modules(run):
     from sim.firmware.run import FirmwareRun
 
+    if getattr(run, "companion", None) is not None:  # returnlink companion beside the firmware
+        from sim.firmware import companion_metrics
+
+        return companion_metrics, "sim.firmware.report"
     if isinstance(run, FirmwareRun):
         from sim.firmware import metrics
 

@@ -22,8 +22,6 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from gcs.plans import from_plan_items
 from gcs.station import GroundStation
 from link.proxy import RadioReport
@@ -31,14 +29,13 @@ from link.radio import LinkState, Radio
 from link.transports import LockstepBus
 from sim.driver import simulated_vehicle
 from sim.jams import Jams
+from sim.lease_record import LeaseRecord
 from sim.operator import Operator
 from sim.policies import DEFAULT_POLICY, check_policy, make_policy
-from sim.policies.base import Baseline
-from sim.scenario import PLAN_COMMANDS, Scenario
+from sim.scenario import Scenario
 from vehicle.app import DT
 from vehicle.lease import Holder
 
-COMMAND_NAMES = {num: name for name, num in PLAN_COMMANDS.items()}
 # A lockstep run has no wall-clock time of its own: its .tlog is stamped from 2026-01-01 00:00:00 UTC + sim time
 # (1970, the UNIX epoch itself, made MAVProxy and QGroundControl show a log from before MAVLink existed).
 TLOG_EPOCH_US = 1_767_225_600 * 1_000_000
@@ -115,31 +112,9 @@ class Trace:
     cmd = _column("cmd")  # what the vehicle commanded the robot
 
 
-@dataclass
-class BlockRecord:
-    """One return block as it ran. ``start``, ``end``, ``target_true``, distance and displacement are in the true
-    frame; ``target`` and ``route`` are the vehicle's plan, in its estimate frame."""
+class Run(LeaseRecord):
+    frame_offset = (0.0, 0.0)  # the vehicle's frame in the true one: the same, its estimator starts at its true pose
 
-    index: int
-    started: float
-    start: tuple[float, float]
-    command: str = ""
-    target: tuple[float, float] | None = None
-    target_true: tuple[float, float] | None = None  # where the robot truly was when it laid the target crumb
-    max_disp_allowed: float = math.inf
-    ended: float | None = None
-    end: tuple[float, float] | None = None
-    reason: str = ""
-    route: np.ndarray | None = None
-    route_obj: object = None
-    distance: float = 0.0
-    max_disp: float = 0.0
-    driving_s: float = 0.0  # time the return commanded motion
-    collisions: int = 0  # during this block
-    collisions0: int = 0  # the world's count when it started
-
-
-class Run:
     def __init__(self, scenario: Scenario, vehicle: str | None = None, seed: int | None = None,
                  progress: bool = False, duration: float | None = None, policy: str = DEFAULT_POLICY) -> None:
         self.scenario = sc = scenario
@@ -170,21 +145,14 @@ class Run:
         self.ticks = 0
         self.duration = sc.duration if duration is None else duration
         self.trace = Trace()
-        self.blocks: list[BlockRecord] = []
         self.tlog: list[bytes] = []
         self.progress = progress
         self.wall = 0.0
         self.stopped = False
         self.metrics: dict | None = None
         self.next_radio_status = 0.0
-        self.link_backs: list[tuple[float, float | None]] = []  # (link regained, start of the contact run)
-        self.regains: list[tuple[float, float | None]] = []  # (LINK_REGAINED time, start of the contact run)
-        self.audit_stale = 0  # actuations the runner's own audit found outside the announced current lease
-        self.announced: tuple[int, int | None] | None = None  # (epoch, current index) from LEASE_EVENTs
-        self.losses: list[tuple[float, float | None]] = []  # (COMMS_LOST time, owner last heard before it)
-        # when each loss's trigger condition became true: LNK_TIMEOUT after the owner was last heard (silence), or
-        # the tick the owner's delivery estimate fell below LNK_MIN_Q (quality), whichever came first
-        self.loss_conditions: list[float | None] = []
+        self._rows = self.trace.rows  # the record's view of the ticks (``sim.lease_record``)
+        self._start_record()
 
     # ----- the loop ------------------------------------------------------------------------------------------
     def run(self) -> Run:
@@ -267,22 +235,9 @@ class Run:
         """The vehicle loop's tick, and what the metrics need of it: when the owner's link came back, and each
         new lease event (the lease the runner's own audit expects, the losses and the regains)."""
         v = self.vehicle
-        link = v.book.link
-        n_events, heard, was_lost, low = len(v.event_log), link.last_heard, link.lost, link.low
+        before = self._vehicle_state(v)
         v.tick(t)
-        if was_lost:
-            link = v.book.link
-            if not link.lost and v.book.owner is not None:
-                self.link_backs.append((t, link.contact_since))
-        if len(v.event_log) > n_events:
-            for e in v.event_log[n_events:]:
-                self.announced = (e.epoch, e.current)
-                if e.reason.name == "COMMS_LOST":
-                    self.losses.append((e.t, heard))
-                    silence = None if heard is None else heard + v.params["LNK_TIMEOUT"]
-                    self.loss_conditions.append(min(silence, t) if low and silence is not None else silence)
-                elif e.reason.name == "LINK_REGAINED":
-                    self.regains.append((e.t, v.book.link.contact_since))
+        self._vehicle_ticked(v, t, before)
 
     def _downlink(self, frames: list[bytes], t: float) -> None:
         """The vehicle's frames through the radio to every station in range; a station out of range or jammed
@@ -387,57 +342,7 @@ class Run:
                         yaw_rate))
         if v.setpoint is not None:
             self._audit(v)
-        blocks = self.blocks
-        blk = blocks[-1] if blocks and blocks[-1].ended is None else None
-        if blk is not None and (not returning or cur.index != blk.index):
-            self._close_block()
-            blk = None
-        if returning and blk is None:
-            blk = BlockRecord(cur.index, t, (float(pos[0]), float(pos[1])), self._command_of(cur),
-                              collisions0=self.world.collisions)
-            self.blocks.append(blk)
-        if blk is not None:
-            rows = tr.rows
-            if len(rows) > 1:
-                a = rows[-2]
-                blk.distance += math.hypot(pos[0] - a[1], pos[1] - a[2])
-                if v.command_out != (0.0, 0.0):
-                    blk.driving_s += DT
-            blk.collisions = self.world.collisions - blk.collisions0
-            blk.max_disp = max(blk.max_disp, math.hypot(pos[0] - blk.start[0], pos[1] - blk.start[1]))
-            self._plan_of(v, blk)
-
-    def _command_of(self, lease) -> str:
-        """The block's mission items by name (RETURN_TO_LINK, ...), or the baseline policy that drives it."""
-        if self.policy != DEFAULT_POLICY:
-            return self.policy.upper()
-        items = lease.block.payload if lease.block is not None else ()
-        return "+".join(COMMAND_NAMES.get(it.command, str(it.command)) for it in items)
-
-    def _plan_of(self, v, blk: BlockRecord) -> None:
-        """Target, route and displacement limit of ``blk``, taken only from the service state of that very lease:
-        the state left over from the block before must never lend its limit to the next one."""
-        c = v.contingency
-        if isinstance(c, Baseline):
-            if c.route is not None and c.route is not blk.route_obj:
-                blk.route_obj, blk.route, blk.target = c.route, c.route, c.target
-                # every baseline heads for home, where the estimator started: the true start of the run
-                blk.target_true = self._true_of(0) if c.target is not None and self.trace.rows else None
-            return
-        st = v.service
-        if st is None or v.service_index != blk.index:
-            return
-        if st.route is not None and st.route is not blk.route_obj:
-            blk.route_obj = st.route
-            blk.route = st.route.points if blk.route is None else np.vstack([blk.route, st.route.points])
-            if blk.target is None and st.route.target is not None:
-                blk.target = st.route.target
-                k = st.route.target_index
-                times = v.trail.times()
-                if 0 <= k < len(times):
-                    blk.target_true = self.true_at(float(times[k]))
-        if blk.max_disp_allowed == math.inf:
-            blk.max_disp_allowed = st.max_displacement
+        self._track_block(v, t, pos, cur, returning)
 
     def _audit(self, v) -> None:
         """An independent check of the stale-command guard: a teleop setpoint that moved the robot this tick must
@@ -447,32 +352,6 @@ class Run:
             return
         if (sp.lease.epoch, sp.lease.path[0]) != self.announced or sp.sender != v.book.owner:
             self.audit_stale += 1
-
-    def _close_block(self) -> None:
-        if not self.blocks or self.blocks[-1].ended is not None:
-            return
-        blk = self.blocks[-1]
-        blk.ended = self.t
-        blk.end = self._true_of(-1) if self.trace.rows else blk.start
-        for ev in self.vehicle.event_log:
-            if ev.expired == blk.index and ev.t >= blk.started - 1e-9:
-                blk.reason = ev.reason.name
-                break
-
-    # ----- outputs -------------------------------------------------------------------------------------------
-    def true_at(self, t: float) -> tuple[float, float]:
-        """True position at simulated time ``t`` (nearest recorded tick)."""
-        return self._true_of(min(len(self.trace.rows) - 1, max(0, int(round(t / DT)) - 1)))
-
-    def _true_of(self, k: int) -> tuple[float, float]:
-        """The true position recorded at tick ``k`` (a row, so the columns need not be built during the run)."""
-        row = self.trace.rows[k]
-        return row[1], row[2]
-
-    @property
-    def lease_events(self) -> list[dict]:
-        return [{"t": round(e.t, 3), "expired": e.expired, "current": e.current, "reason": e.reason.name}
-                for e in self.vehicle.event_log]
 
 
 def write_tlog(run: Run, path: Path) -> Path:

@@ -92,10 +92,10 @@ def simulate(trial: Trial, progress: bool = False):
 
     if trial.vehicle == FIRMWARE_VEHICLE:
         from sim.firmware.locate import find_firmware
-        from sim.firmware.run import FirmwareRun
+        from sim.firmware.run import firmware_run
 
-        run = FirmwareRun(scenario_of(trial), trial.seed, trial.policy, find_firmware(trial.firmware or None),
-                          progress=progress).run()
+        run = firmware_run(scenario_of(trial), trial.seed, trial.policy, find_firmware(trial.firmware or None),
+                           progress=progress).run()
     else:
         from sim.runner import Run
 

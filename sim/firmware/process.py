@@ -34,6 +34,9 @@ SIM_IN_PORT = 9003  # + 10·instance: the firmware's own end of the JSON link
 SERIAL_TCP_PORTS = (5760, 5762, 5763)  # + 10·instance: SERIAL0-2 listen here by default
 RC_IN_PORT = 5501  # + 10·instance
 MAX_INSTANCE = 199
+# the first instance number to try, where a machine shared with other SITL users reserves a range for this checkout
+# (else one derived from the process id); a number taken is still skipped, so this only says where to start
+INSTANCE_ENV = "RETURNLINK_FIRMWARE_INSTANCE"
 STOP_GRACE_S = 0.2  # how long SIGTERM gets before SIGKILL
 _PR_SET_PDEATHSIG = 1
 
@@ -56,8 +59,14 @@ def _port_free(kind: int, port: int) -> bool:
 
 
 def claim_instance(start: int | None = None) -> tuple[int, socket.socket]:
-    """An instance number and the bound JSON socket that reserves it. The search starts at a place derived from
-    the process id, so parallel workers rarely probe the same numbers first."""
+    """An instance number and the bound JSON socket that reserves it. The search starts at ``start``, else at
+    $RETURNLINK_FIRMWARE_INSTANCE, else at a place derived from the process id, so parallel workers rarely probe
+    the same numbers first."""
+    if start is None and os.environ.get(INSTANCE_ENV):
+        text = os.environ[INSTANCE_ENV]
+        if not text.isdigit() or int(text) > MAX_INSTANCE:
+            raise FirmwareError(f"{INSTANCE_ENV}={text!r}: an instance number 0..{MAX_INSTANCE} is needed")
+        start = int(text)
     first = os.getpid() % (MAX_INSTANCE + 1) if start is None else start
     for k in range(MAX_INSTANCE + 1):
         n = (first + k) % (MAX_INSTANCE + 1)

@@ -1,6 +1,7 @@
 """The two pictures of a firmware run, like a native run's: where the rover went (true frame, coloured by the
 firmware's mode, with the loss and rest points and the EKF's path) and what the firmware did over time (its mode
-timeline against the radio link and the distance driven back)."""
+timeline against the radio link and the distance driven back). A companion run's return is its return-service
+lease, which drives in GUIDED: that is what its pictures mark as the return."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from sim.firmware.lockstep import MODE_NAMES
 from sim.firmware.operator import RETURN_MODES
 from sim.firmware.run import FirmwareRun
 from sim.plots import draw_world, plt, save
+from vehicle.lease import Holder
 
 MODE_COLOURS = {"GUIDED": "tab:green", "HOLD": "tab:orange", "RTL": "tab:red", "SMART_RTL": "tab:blue",
                 "MANUAL": "0.5"}
@@ -21,6 +23,15 @@ def _columns(run: FirmwareRun) -> dict[str, np.ndarray]:
     a = np.array([r[:10] for r in run.rows], dtype=float) if run.rows else np.zeros((0, 10))
     return {"t": a[:, 0], "x": a[:, 1], "y": a[:, 2], "ex": a[:, 3], "ey": a[:, 4], "mode": a[:, 5],
             "link": a[:, 6], "rssi": a[:, 7]}
+
+
+def _returning(run: FirmwareRun, modes: np.ndarray) -> np.ndarray:
+    """Per tick, whether a return was under way: the companion's return-service lease, else a firmware failsafe
+    mode (the companion drives its return in GUIDED, the mode the operator drives in)."""
+    trace = getattr(run, "trace", None)
+    if trace is not None:
+        return np.array(trace.holder, dtype=int) == int(Holder.RETURN_SERVICE)
+    return np.isin(modes, tuple(RETURN_MODES))
 
 
 def trajectory(run: FirmwareRun, path: Path) -> Path:
@@ -34,8 +45,14 @@ def trajectory(run: FirmwareRun, path: Path) -> Path:
         name = MODE_NAMES.get(int(k), str(k))
         sel = np.where(modes == k, 1.0, np.nan)
         ax.plot(c["y"] * sel, c["x"] * sel, color=MODE_COLOURS.get(name, "k"), lw=1.6, label=f"true path, {name}")
+    companion = getattr(run, "companion", None) is not None
+    if companion:
+        sel = np.where(_returning(run, modes), 1.0, np.nan)
+        ax.plot(c["y"] * sel, c["x"] * sel, color="tab:blue", lw=3.2, alpha=0.6,
+                label="true path under the companion's return lease")
+    rest = "at rest after the return (true)" if companion else "at rest after the failsafe (true)"
     for key, marker, colour, label in (("loss_position", "X", "tab:red", "link lost (last heard, true)"),
-                                       ("rest_position", "s", "tab:blue", "at rest after the failsafe (true)")):
+                                       ("rest_position", "s", "tab:blue", rest)):
         p = m.get(key)
         if p:
             ax.plot(p[1], p[0], marker=marker, ms=12, color=colour, mfc="white" if marker == "s" else colour,
@@ -68,7 +85,8 @@ def timeline(run: FirmwareRun, path: Path) -> Path:
     if len(t) and run.heard:
         k = np.clip(np.round(np.array(run.heard) / (t[1] - t[0] if len(t) > 1 else 1)).astype(int) - 1, 0, len(t) - 1)
         heard[k] = 1.0
-    ax.vlines(t[heard > 0], 0, 0.15, color="tab:green", lw=0.5, alpha=0.6, label="station heard by the firmware")
+    hearer = "the companion" if getattr(run, "companion", None) is not None else "the firmware"
+    ax.vlines(t[heard > 0], 0, 0.15, color="tab:green", lw=0.5, alpha=0.6, label=f"station heard by {hearer}")
     ax.set_ylim(-0.05, 1.05)
     ax.set_ylabel("link")
     ax2 = ax.twinx()
@@ -77,7 +95,7 @@ def timeline(run: FirmwareRun, path: Path) -> Path:
     ax.legend(loc="lower left", fontsize=7)
     ax = axes[2]
     step = np.concatenate([[0.0], np.hypot(np.diff(c["x"]), np.diff(c["y"]))]) if len(t) else np.zeros(0)
-    returning = np.isin(c["mode"], tuple(RETURN_MODES))
+    returning = _returning(run, c["mode"])
     ax.plot(t, np.cumsum(step * returning), color="tab:blue")
     ax.set_ylabel("driven back (m)")
     ax.set_xlabel("simulated time since the firmware was ready (s)")

@@ -33,12 +33,15 @@ from link.transports import LockstepBus
 from sim.firmware.lockstep import DT, MODE_NAMES, SKID_PARAMS, SPEEDUP, Lockstep
 from sim.firmware.operator import FirmwareOperator
 from sim.jams import Jams
+from sim.policies import COMPANION_POLICY, FAILSAFE_POLICIES
 from sim.robots import make_robot
 from sim.runner import TLOG_EPOCH_US
 from sim.scenario import Scenario
+from vehicle.companion.setup import NEEDS
 
 _TLOG_STAMP = struct.Struct(">Q").pack
-FS_ACTION: dict[str, int] = {"ardupilot-hold": 2, "ardupilot-rtl": 1, "ardupilot-smartrtl": 4}  # per policy
+# per policy; the companion's is the backstop: Hold once a dead companion's keepalive stops (docs/architecture.md §11)
+FS_ACTION: dict[str, int] = {"ardupilot-hold": 2, "ardupilot-rtl": 1, "ardupilot-smartrtl": 4, COMPANION_POLICY: 2}
 
 
 def firmware_params(policy: str, lnk_timeout: float, max_speed: float) -> dict[str, float]:
@@ -51,10 +54,19 @@ def firmware_params(policy: str, lnk_timeout: float, max_speed: float) -> dict[s
     - WP_RADIUS 1 m: a GUIDED position target counts as reached where the scripted operator moves on;
     - skid steering (SERVO1_FUNCTION 73, SERVO3_FUNCTION 74): the scenario's rover is a differential drive that
       turns on the spot, as the native vehicle's is, so only the autopilot differs between the two (as a car, the
-      firmware had to drive forward to turn round and wedged itself in the 3.6 m culvert)."""
-    return {"FS_GCS_ENABLE": 1, "FS_ACTION": FS_ACTION[policy], "FS_GCS_TIMEOUT": max(2.0, lnk_timeout),
-            "FS_THR_ENABLE": 0, "CRUISE_SPEED": round(max_speed / 2, 3), "CRUISE_THROTTLE": 50, "WP_RADIUS": 1.0,
-            **SKID_PARAMS}
+      firmware had to drive forward to turn round and wedged itself in the 3.6 m culvert).
+    For the companion the GCS failsafe is its backstop, not the link-loss policy: its keepalive is what the firmware
+    hears, so FS_GCS_TIMEOUT is what ``returnlink companion --check`` asks for (2..5 s), and every other parameter
+    on that list is set to the value ``--configure`` would set (``vehicle.companion.setup.NEEDS``), so the run
+    starts from a firmware the companion's own check passes."""
+    params = {"FS_GCS_ENABLE": 1, "FS_ACTION": FS_ACTION[policy], "FS_GCS_TIMEOUT": max(2.0, lnk_timeout),
+              "FS_THR_ENABLE": 0, "CRUISE_SPEED": round(max_speed / 2, 3), "CRUISE_THROTTLE": 50, "WP_RADIUS": 1.0,
+              **SKID_PARAMS}
+    if policy == COMPANION_POLICY:
+        for need in NEEDS:
+            value = params.get(need.name, 0.0)  # ArduPilot's default of the others is 0
+            params[need.name] = value if need.ok(value) else need.fix(value)
+    return params
 
 
 @dataclass
@@ -79,12 +91,13 @@ class FirmwareRun:
 
     kind = "ardurover"
     speedup = SPEEDUP  # the firmware's own pace; lockstep runs leave the pace to the bridge
+    policies: tuple[str, ...] = FAILSAFE_POLICIES  # what this class flies (``firmware_run`` picks the class)
 
     def __init__(self, scenario: Scenario, seed: int | None = None, policy: str = "ardupilot-smartrtl",
                  firmware: Path | None = None, progress: bool = False, duration: float | None = None,
                  log_path: Path | None = None) -> None:
-        if policy not in FS_ACTION:
-            raise ValueError(f"policy {policy!r} is not one of the firmware's failsafes ({', '.join(FS_ACTION)})")
+        if policy not in self.policies:
+            raise ValueError(f"policy {policy!r} is not one of {', '.join(self.policies)}")
         if firmware is None:
             raise ValueError("no firmware binary given")
         self.scenario = sc = scenario
@@ -105,8 +118,7 @@ class FirmwareRun:
         self.stations = {s.name: Station(s.name, (s.x, s.y), s.power_dbm, s.name == sc.operator_station)
                          for s in sc.stations}
         self.op_station = self.stations[sc.operator_station]
-        self.operator = FirmwareOperator(sc.route, sc.resume_route, self.origin, sc.attempts,
-                                         sysid=sc.station(sc.operator_station).sysid)
+        self.operator = self._make_operator(sc)
         self.op_station.operator = self.operator
         self.events = sorted(sc.events, key=lambda e: e.t)
         self.jams = Jams()
@@ -121,6 +133,11 @@ class FirmwareRun:
         self.stopped = False
         self.next_radio_status = 0.0
         self.metrics: dict | None = None
+
+    def _make_operator(self, sc: Scenario) -> FirmwareOperator:
+        """The scripted operator: a person flying the firmware in GUIDED from the scenario's station."""
+        return FirmwareOperator(sc.route, sc.resume_route, self.origin, sc.attempts,
+                                sysid=sc.station(sc.operator_station).sysid)
 
     # ----- the loop ------------------------------------------------------------------------------------------
     def run(self) -> FirmwareRun:
@@ -181,8 +198,8 @@ class FirmwareRun:
         pos = self.robot.pose[:2]
         for st in stations:
             st.state = radio.link(st.antenna, st.power_dbm, pos) if st.alive else None
-        # the firmware's frames out through the radio
-        frames = self.link.drain(t)
+        # the vehicle's frames out through the radio
+        frames = self._vehicle_frames(t)
         if frames:
             live = [st for st in stations if st.state is not None and not self._jammed(st.name, t)]
             for data in frames:
@@ -206,10 +223,8 @@ class FirmwareRun:
                 if at is not None:
                     bus.send(st.name, "vehicle", data, at)
         for data, src in bus.receive("vehicle", t):
-            if self.link.fw_addr is not None:
-                self.link.send(data)
-                if src == self.op_station.name:
-                    self.heard.append(t)
+            self._vehicle_receive(data, src, t)
+        self._vehicle_tick(t)
         if t >= self.next_radio_status:
             self.next_radio_status = t + 1.0
             op = self.op_station
@@ -219,6 +234,21 @@ class FirmwareRun:
                 self._log_frame(data, t)
         self._record(t, pos)
 
+    # ----- the vehicle's side of the radio: the firmware's SERIAL0 itself -------------------------------------
+    def _vehicle_frames(self, t: float) -> list[bytes]:
+        """What the vehicle sends through the radio this tick: here everything the firmware said."""
+        return self.link.drain(t)
+
+    def _vehicle_receive(self, data: bytes, src: str, t: float) -> None:
+        """A frame the radio delivered from station ``src``: here straight to the firmware."""
+        if self.link.fw_addr is not None:
+            self.link.send(data)
+            if src == self.op_station.name:
+                self.heard.append(t)
+
+    def _vehicle_tick(self, t: float) -> None:
+        """Whatever runs on the vehicle beside the firmware, once a tick after the radio delivered: here nothing."""
+
     def _log_frame(self, data: bytes, t: float) -> None:
         self.tlog.append(_TLOG_STAMP(TLOG_EPOCH_US + int(t * 1e6)) + data)
 
@@ -227,23 +257,26 @@ class FirmwareRun:
 
     def _events(self, t: float) -> None:
         while self.events and self.events[0].t <= t + 1e-9:
-            ev = self.events.pop(0)
-            st = self.stations.get(ev.station or self.scenario.operator_station)
-            if ev.action == "jam":
-                self.jams.jam(ev.t, ev.duration, ev.station)
-            elif ev.action == "unjam":
-                self.jams.unjam(t)
-            elif ev.action == "kill_gcs" and st is not None:
-                st.alive = False
-            elif ev.action == "revive_gcs" and st is not None:
-                st.alive = True
-            elif ev.action == "rtl" and st is not None and st.operator is not None:
-                st.operator.request_rtl(t)
-            elif ev.action == "stop":
-                self.stopped = True
-            else:
-                # leases, claims and returnlink parameters mean nothing to the firmware: said, not faked
-                self.notes.append(f"t={ev.t:g} s: event {ev.action!r} does not apply to the ArduPilot firmware")
+            self._event(self.events.pop(0), t)
+
+    def _event(self, ev, t: float) -> None:
+        """One timed event of the scenario, due now."""
+        st = self.stations.get(ev.station or self.scenario.operator_station)
+        if ev.action == "jam":
+            self.jams.jam(ev.t, ev.duration, ev.station)
+        elif ev.action == "unjam":
+            self.jams.unjam(t)
+        elif ev.action == "kill_gcs" and st is not None:
+            st.alive = False
+        elif ev.action == "revive_gcs" and st is not None:
+            st.alive = True
+        elif ev.action == "rtl" and st is not None and st.operator is not None:
+            st.operator.request_rtl(t)
+        elif ev.action == "stop":
+            self.stopped = True
+        else:
+            # leases, claims and returnlink parameters mean nothing to the firmware: said, not faked
+            self.notes.append(f"t={ev.t:g} s: event {ev.action!r} does not apply to the ArduPilot firmware")
 
     def _record(self, t: float, pos: tuple[float, float]) -> None:
         est = self.link.tap.estimate
@@ -269,6 +302,13 @@ class FirmwareRun:
         return row[1], row[2]
 
 
+def firmware_run(scenario: Scenario, seed: int | None, policy: str, firmware: Path, **options) -> FirmwareRun:
+    """The run that flies ``policy`` on the firmware: its own failsafe, or returnlink companion beside it."""
+    if policy == COMPANION_POLICY:
+        from sim.firmware.companion import CompanionRun  # (built on this module)
+
+        return CompanionRun(scenario, seed, firmware=firmware, **options)
+    return FirmwareRun(scenario, seed, policy, firmware, **options)
 
 
-__all__ = ["FS_ACTION", "FirmwareRun", "MODE_NAMES", "firmware_params"]
+__all__ = ["FS_ACTION", "FirmwareRun", "MODE_NAMES", "firmware_params", "firmware_run"]

@@ -15,7 +15,10 @@ if TYPE_CHECKING:  # the command line reads the names without loading the vehicl
 
 NATIVE_POLICIES: tuple[str, ...] = ("returnlink", "hold", "rtl", "smartrtl", "backup")
 # the real ArduPilot firmware's own failsafes (docs/architecture.md §10), flown only by vehicle ``ardurover``
-FIRMWARE_POLICIES: tuple[str, ...] = ("ardupilot-hold", "ardupilot-rtl", "ardupilot-smartrtl")
+FAILSAFE_POLICIES: tuple[str, ...] = ("ardupilot-hold", "ardupilot-rtl", "ardupilot-smartrtl")
+# returnlink as a companion computer beside the same firmware (§11), its ground link through the scenario's radio
+COMPANION_POLICY = "companion"
+FIRMWARE_POLICIES: tuple[str, ...] = (*FAILSAFE_POLICIES, COMPANION_POLICY)
 POLICY_NAMES: tuple[str, ...] = NATIVE_POLICIES + FIRMWARE_POLICIES
 DEFAULT_POLICY = "returnlink"
 FIRMWARE_VEHICLE = "ardurover"
@@ -23,16 +26,17 @@ DEFAULT_FIRMWARE_POLICY = "ardupilot-smartrtl"
 
 
 def flies(policy: str, vehicle: str) -> bool:
-    """Whether ``vehicle`` can fly ``policy``: the firmware's failsafes need the firmware, and the firmware has no
-    returnlink onboard to fly the native policies with."""
+    """Whether ``vehicle`` can fly ``policy``: the firmware's failsafes and the companion need the firmware, and the
+    firmware has no returnlink onboard to fly the native policies with."""
     return (policy in FIRMWARE_POLICIES) == (vehicle == FIRMWARE_VEHICLE)
 
 
 def check_policy(name: str) -> str:
     """The name of a policy the native vehicle flies, or ValueError saying why not."""
     if name in FIRMWARE_POLICIES:
-        raise ValueError(f"policy {name!r} is the ArduPilot firmware's own failsafe: fly it with vehicle "
-                         f"{FIRMWARE_VEHICLE!r}")
+        what = "returnlink companion beside the ArduPilot firmware" if name == COMPANION_POLICY else \
+            "the ArduPilot firmware's own failsafe"
+        raise ValueError(f"policy {name!r} is {what}: fly it with vehicle {FIRMWARE_VEHICLE!r}")
     if name not in NATIVE_POLICIES:
         raise ValueError(f"unknown policy {name!r}; known: {', '.join(POLICY_NAMES)}")
     return name

@@ -1,0 +1,97 @@
+"""The scripted operator of a companion run: a person at a ground station flying an ArduPilot rover that has
+returnlink companion between its telemetry port and the radio.
+
+It is the firmware operator (``sim.firmware.operator.FirmwareOperator``: GUIDED, arm, a position target per
+waypoint to the autopilot, component 1) with the lease steps of the native operator (``sim.operator.Operator``)
+in front, taken through the same ground-station library (``gcs.station.GroundStation``) addressed to the
+companion, component 191: it takes control (MAV_CMD_REQUEST_OPERATOR_CONTROL), uploads the scenario's return plan,
+and only then switches the autopilot to GUIDED, arms and drives. The companion forwards those to the autopilot only
+while the operator's lease is current, so the operator keeps its hands off while the return holds the lease, and
+when the return has ended and the vehicle waits for a claim it claims the fresh lease (MAV_CMD_LEASE_CLAIM) before
+it takes the autopilot back from HOLD as the firmware operator does.
+
+Everything it sends leaves through the station's one MAVLink encoder, so the companion sees one sequence of
+packet numbers from it (its link watch counts the gaps) and one heartbeat a second.
+"""
+
+from __future__ import annotations
+
+from gcs.station import GroundStation, mav
+from link.mission import Item
+from sim.firmware.operator import GCS_COMPID, GCS_SYSID, STALE_TELEMETRY, FirmwareOperator
+from vehicle.companion.router import COMPANION_COMPID
+
+_AWAITING_CLAIM, _TELEOP = mav.RETURNLINK_STATE_AWAITING_CLAIM, mav.RETURNLINK_STATE_TELEOP
+_TAKING_CONTROL = frozenset(("connect", "acquiring", "uploading"))  # the lease steps before the firmware's own
+
+
+class CompanionOperator(FirmwareOperator):
+    def __init__(self, route, resume_route, origin: tuple[float, float], plan: list[Item], attempts: int = 2,
+                 sysid: int = GCS_SYSID, compid: int = GCS_COMPID, target_system: int = 1) -> None:
+        super().__init__(route, resume_route, origin, attempts, sysid, compid, target_system)
+        self.gs = GroundStation(sysid, compid, target=target_system, target_comp=COMPANION_COMPID)
+        self.plan = plan
+        self.pending = None  # the lease command in flight (acquire, claim)
+        self.transfer = None  # the plan upload
+        self.claims = 0
+
+    # ----- what it hears and sends -----------------------------------------------------------------------------
+    def feed(self, data: bytes, t: float) -> None:
+        super().feed(data, t)
+        self.gs.feed(data, t)
+
+    def _send(self, msg) -> None:
+        self.gs.mav.send(msg)
+
+    def request_rtl(self, t: float) -> None:
+        """A scripted RTL (the scenario's ``rtl`` event): to the companion, where it expires the operator's lease
+        and the return plan takes over, as on the native vehicle."""
+        self.gs.rtl()
+        self.log.append((t, "rtl requested"))
+
+    def tick(self, t: float) -> list[bytes]:
+        st = self.gs.vehicle.status
+        if self.phase in _TAKING_CONTROL:
+            self._take_control(t)
+        elif st is not None:
+            self._follow_lease(t, st)
+        return self.gs.tick(t)
+
+    # ----- the lease steps --------------------------------------------------------------------------------------
+    def _take_control(self, t: float) -> None:
+        """Take control of the companion and upload the return plan, one step a tick, as the native operator does."""
+        gs = self.gs
+        if self.phase == "connect":
+            if gs.vehicle.status is not None:
+                self.pending = gs.acquire()
+                self.phase = "acquiring"
+        elif self.phase == "acquiring":
+            if self.pending is not None and self.pending.done:
+                if self.pending.ok:
+                    self.log.append((t, f"in control, epoch {self.pending.param2}"))
+                    self.transfer = gs.upload(self.plan) if self.plan else None
+                    self.phase = "uploading"
+                else:
+                    self.phase = "connect"
+        elif self.transfer is None or self.transfer.done:
+            if self.transfer is not None:
+                self.log.append((t, f"plan upload {'accepted' if self.transfer.ok else 'failed'}"))
+            self.phase = "guided"  # the firmware operator's steps from here (the companion streams its position)
+
+    def _follow_lease(self, t: float, st) -> None:
+        """Drive while the operator's lease is current; claim the fresh one after a return; else hands off."""
+        gs = self.gs
+        mine = st.owner == gs.sysid
+        if st.state == _AWAITING_CLAIM and mine:
+            fresh = gs.vehicle.last_heard is not None and t - gs.vehicle.last_heard < STALE_TELEMETRY
+            if fresh and (self.pending is None or self.pending.done):
+                self.pending = gs.claim(-1)
+                self.claims += 1
+                self.log.append((t, f"claiming [{st.epoch},{st.current}]"))
+            return
+        if st.state == _TELEOP and mine:
+            self._step(t)
+            return
+        # the return holds the lease: what was being driven toward counts as cut off, and nothing is sent
+        self.cut_off = self.heading_to or self.cut_off
+        self.sent_target = None
