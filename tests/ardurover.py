@@ -26,6 +26,8 @@ from pathlib import Path
 import pytest
 from pymavlink import mavutil
 
+from sim.firmware.process import claim_instance
+
 ENV = "RETURNLINK_ARDUROVER"
 TEST_PARAMS = {
     "FS_THR_ENABLE": 0,  # SITL has no RC receiver: no radio failsafe at boot
@@ -52,11 +54,15 @@ def firmware() -> Path:
 
 
 class Firmware:
-    """One ArduRover SITL process (instance ``instance``: ports 5760 + 10 * instance and up), stopped by pid."""
+    """One ArduRover SITL process (instance ``instance``: ports 5760 + 10 * instance and up), stopped by pid.
 
-    def __init__(self, workdir: Path, instance: int, params: dict[str, float] | None = None) -> None:
+    The instance is claimed as the simulator's runs claim theirs (``claim_instance``: its ports free, its JSON port
+    held until ``stop``), so tests never collide with each other or with anything else using SITL ports here."""
+
+    def __init__(self, workdir: Path, params: dict[str, float] | None = None) -> None:
         self.exe = firmware()
         self.dir = workdir
+        instance, self.reservation = claim_instance()
         self.instance = instance
         self.serial0 = 5760 + 10 * instance
         self.serial1 = 5762 + 10 * instance
@@ -140,3 +146,4 @@ class Firmware:
             except subprocess.TimeoutExpired:
                 os.killpg(self.proc.pid, signal.SIGKILL)
                 self.proc.wait(5)
+        self.reservation.close()  # the instance is free again once its firmware is gone

@@ -1,6 +1,6 @@
 """Companion mode against the real ArduPilot Rover firmware (SITL, its own physics), docs/architecture.md §11.
 
-Each test starts its own firmware (instances 21-24) and ``returnlink companion`` as processes and talks to the
+Each test starts its own firmware (on a free instance) and ``returnlink companion`` as processes and talks to the
 companion over loopback UDP as ground stations do; an observer on the firmware's SERIAL0 tells what the rover did.
 """
 
@@ -22,10 +22,9 @@ RANGE_M = 15.0  # the test's radio: after the operator goes silent it is heard a
 
 
 @pytest.fixture()
-def rig(tmp_path, request):
+def rig(tmp_path):
     """The firmware booted, the companion on its SERIAL1, and the owner's station the companion sends to."""
-    instance = request.param if hasattr(request, "param") else 21
-    fw = Firmware(tmp_path, instance)
+    fw = Firmware(tmp_path)
     owner = LiveStation(255)
     comp = None
     try:
@@ -88,7 +87,6 @@ def test_claim_plan_stranger_refused_drive_out_silence_and_back_to_where_the_lin
     assert fw.mode == HOLD
 
 
-@pytest.mark.parametrize("rig", [22], indirect=True)
 def test_killing_the_companion_mid_drive_ends_in_the_firmwares_own_hold(rig):
     fw, comp, owner = rig
     claim_and_arm(fw, owner)
@@ -102,7 +100,6 @@ def test_killing_the_companion_mid_drive_ends_in_the_firmwares_own_hold(rig):
     pump([owner, fw], 5, lambda: fw.speed < 0.1, "the rover to stand still")
 
 
-@pytest.mark.parametrize("rig", [23], indirect=True)
 def test_check_and_configure_against_the_firmware(rig, capsys):
     fw, comp, owner = rig
     from sim.cli import main
@@ -117,7 +114,7 @@ def test_check_and_configure_against_the_firmware(rig, capsys):
 
 
 def test_mavproxy_flies_the_rover_through_the_companion(tmp_path):
-    fw = Firmware(tmp_path, 24)
+    fw = Firmware(tmp_path)
     mp = comp = None
     try:
         fw.boot()

@@ -43,7 +43,7 @@ from vehicle.lease_terms import State
 from vehicle.params import load_defaults
 
 # what a forwarded frame needs to be audited: it changes the robot's state under a lease
-_AUDITED = frozenset((router.Access.LEASE, router.Access.MODE))
+_AUDITED = frozenset((router.Authority.LEASE, router.Authority.MODE))
 _COMPID_AT = {0xFD: 6, 0xFE: 4}  # MAVLink 2 / 1 start byte -> the byte that holds the sender's component id
 
 
@@ -117,7 +117,7 @@ class CompanionRun(LeaseRecord, FirmwareRun):
         if v is None or not v.event_log:
             return
         for m in self._parser.parse_buffer(data) or ():
-            if m.get_type() == "BAD_DATA" or router.access(m) not in _AUDITED:
+            if m.get_type() == "BAD_DATA" or router.authority(m) not in _AUDITED:
                 continue
             if v.event_log[-1].holder is not Holder.OPERATOR or m.get_srcSystem() != v.book.owner:
                 self.audit_stale += 1
