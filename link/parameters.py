@@ -44,9 +44,9 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("LNK_MAP_CELL", 2.0, 0.5, 20.0, "m", "cell size of the link map (a new size starts a new map)"),
     ParamSpec("LNK_MAP_CELLS", 1024, 16, 65536, "", "memory bound of the link map (far cells are dropped first)",
               integer=True),
-    ParamSpec("LNK_MAP_OBS", 4, 1, 1000, "", "observations (0.5 s looks) before a cell can count as reliable",
+    ParamSpec("LNK_MAP_OBS", 3, 1, 1000, "", "observations (0.5 s looks) before a cell can count as reliable",
               integer=True),
-    ParamSpec("LNK_MAP_MARGIN", 0.4, 0.0, 0.9, "",
+    ParamSpec("LNK_MAP_MARGIN", 0.3, 0.0, 0.9, "",
               "a reliable cell's delivery lower bound exceeds LNK_MIN_Q by this"),
 )
 BY_NAME = {s.name: s for s in SPECS}

@@ -72,7 +72,9 @@ class ControlLoop:
             v.contingency.observe(v, t)
         self._crumbs.append(Crumb(p.x, p.y, t, p.std, good, math.nan))
 
-        out = book.tick_changes(t)  # (None on most ticks: nothing happened)
+        # a regain halts a return only where the link map says the link holds (asked only while the link is lost)
+        holds = not book.link.lost or self.returns.place_holds(p.x, p.y)
+        out = book.tick_changes(t, holds)  # (None on most ticks: nothing happened)
         if out is not None:
             v.apply(out)
         cur = v.book.current

@@ -51,6 +51,8 @@ Z = 1.645  # Wilson bound's z: one-sided 95 %
 RATE_MAX_GAP = 2.0  # s: a sequence gap after a longer silence says nothing about the sender's rate (it may wrap)
 RATE_DECAY = 0.9  # per packet: the sender's rate follows a change within a few tens of packets
 MAX_RATE = 200.0  # packets/s: a rate beyond this is a glitch (a restarted sender), not a measure
+SEEN_BITS = 64  # sequence numbers behind the newest whose arrival is remembered (duplicates are not deliveries)
+SEEN_MASK = (1 << SEEN_BITS) - 1
 EVICT_SHARE = 8  # when full, drop 1/EVICT_SHARE of the cells at once (amortised cost, see the module docstring)
 
 
@@ -120,6 +122,7 @@ class LinkMap:
         self._slice_expected = 0.0
         # the sender's rate, from its sequence numbers: decayed sums of sequence advance and of time
         self._seq: int | None = None
+        self._seen = 0  # bit i: the packet i numbers behind the newest arrived
         self._seq_t = 0.0
         self._adv = 0.0
         self._dt = 0.0
@@ -137,16 +140,24 @@ class LinkMap:
         if seq is not None:
             seq %= SEQ_SPACE
             last = self._seq
-            if last is not None:
+            if last is None:
+                self._seen = 1
+            else:
                 d = (seq - last) % SEQ_SPACE
                 if d == 0:
-                    return
-                gap = t - self._seq_t
-                if d < SEQ_SPACE // 2 and 0 < gap <= RATE_MAX_GAP and d / gap <= MAX_RATE:
-                    self._adv = RATE_DECAY * self._adv + d
-                    self._dt = RATE_DECAY * self._dt + gap
-                if d >= SEQ_SPACE // 2:  # a late packet: delivered, but the newest number stays
-                    seq = last
+                    return  # a duplicate of the newest
+                if d >= SEQ_SPACE // 2:  # behind the newest: a late packet, or a duplicate of one
+                    behind = SEQ_SPACE - d
+                    if behind >= SEEN_BITS or self._seen >> behind & 1:
+                        return
+                    self._seen |= 1 << behind
+                    seq = last  # the newest number stays
+                else:
+                    gap = t - self._seq_t
+                    if 0 < gap <= RATE_MAX_GAP and d / gap <= MAX_RATE:
+                        self._adv = RATE_DECAY * self._adv + d
+                        self._dt = RATE_DECAY * self._dt + gap
+                    self._seen = (self._seen << d | 1) & SEEN_MASK
             self._seq, self._seq_t = seq, t
         cell = self._cell
         if cell is not None:
@@ -154,7 +165,7 @@ class LinkMap:
 
     def forget_sender(self) -> None:
         """A new owner: its rate and sequence numbers are its own (what was measured stays on the map)."""
-        self._seq, self._adv, self._dt = None, 0.0, 0.0
+        self._seq, self._adv, self._dt, self._seen = None, 0.0, 0.0, 0
 
     def rssi(self, dbm: float) -> None:
         """The vehicle's radio reports the owner's signal strength: one sample for the robot's cell."""
