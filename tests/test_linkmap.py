@@ -186,3 +186,15 @@ def test_a_bad_linkmap_csv_is_named_by_line_and_field(text, line, field):
         decode(text)
     assert (e.value.line, e.value.field) == (line, field)
 
+
+
+def test_the_map_pages_link_layer_is_made_from_the_csv_bytes():
+    from gcs.linkmap_layer import layer
+
+    cells = [MapCell(1.0, 1.0, 7, 30.0, 30, 1.0, 0.9, -45.0, 3.0), MapCell(3.0, 1.0, 5, 20.0, 2, 0.1, 0.01, -95.0, 5.0),
+             MapCell(5.0, 1.0, 0, 0.0, 0, math.nan, 0.0, math.nan, 6.0)]
+    lay = layer(encode(cells))
+    assert lay["error"] is None and lay["cell"] == 2.0
+    assert lay["cells"] == [[1.0, 1.0, 1.0, 7], [3.0, 1.0, 0.1, 5], [5.0, 1.0, None, 0]]
+    bad = layer(b"north,east\n1,2\n")
+    assert bad["cells"] == [] and "line 1" in bad["error"]
