@@ -262,10 +262,19 @@ class LinkMap:
         return any(c.observations >= cfg.min_obs and wilson_lower(c.delivered, c.expected) > cfg.threshold
                    for c in self._cells.values())
 
-    def first_reliable(self, route: np.ndarray, skip: float = 0.0) -> tuple[int, float] | None:
-        """Along polyline ``route`` (n, 2), from ``skip`` metres on, the first point in a reliable cell, as (segment
-        k, fraction u along it); None if none is. Sampled at a quarter cell, so no cell the route crosses is
-        missed by more than a corner."""
+    def poor(self, x: float, y: float) -> bool:
+        """Whether the map has seen the link fail at (x, y): enough observations, and a delivery below the
+        threshold a reliable place's bound must clear (a cell merely unknown is not poor)."""
+        c = self._cells.get(self.key(x, y))
+        cfg = self.config
+        return (c is not None and c.observations >= cfg.min_obs and c.expected > 0
+                and c.delivered / c.expected < cfg.threshold)
+
+    def first_reliable(self, route: np.ndarray, skip: float = 0.0, poor: bool = False) -> tuple[int, float] | None:
+        """Along polyline ``route`` (n, 2), from ``skip`` metres on, the first point in a reliable cell (with
+        ``poor``: in a cell where the link was seen to fail), as (segment k, fraction u along it); None if none
+        is. Sampled at a quarter cell, so no cell the route crosses is missed by more than a corner."""
+        test = self.poor if poor else self.reliable
         step = 0.25 * self.config.cell
         walked = 0.0
         for k in range(len(route) - 1):
@@ -280,7 +289,7 @@ class LinkMap:
                 u = m / n
                 if walked + u * length < skip - 1e-9:
                     continue
-                if self.reliable(ax + u * (bx - ax), ay + u * (by - ay)):
+                if test(ax + u * (bx - ax), ay + u * (by - ay)):
                     return k, u
             walked += length
         return None

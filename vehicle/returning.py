@@ -270,6 +270,7 @@ def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_dis
         way = Way(pts, outbound_speeds(trail, idx), at_goal)
     lost_link = target is Target.LINK and link_lost
     total = way.length
+    onward_to = total  # how far along the way a block that arrives with the link still down may go on
     if not lost_link:
         at, by_map, extra = total, False, 0.0
     else:
@@ -278,6 +279,7 @@ def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_dis
             hit = linkmap.first_reliable(way.points, skip=way.goal)
             if hit is not None:
                 at, by_map, extra = _along(way.points, *hit), True, map_depth
+                onward_to = _next_stretch(linkmap, way.points, at, map_depth)
     at = min(at, total)
     head, _, k = _cut(way.points, at)
     gx, gy = float(head[-1, 0]), float(head[-1, 1])
@@ -285,8 +287,8 @@ def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_dis
     # a point's speed is that of the stretch leaving it: the cut point drives on at its segment's
     speeds = np.concatenate([way.speeds[: k2 + 1], [way.speeds[k2]]])
     onward = None
-    if lost_link:
-        o_pts = _cut(way.points, at)[1]
+    if lost_link and onward_to > at + extra:
+        o_pts = _cut(_cut(way.points, onward_to)[0], at)[1]
         onward = Route(o_pts, (float(o_pts[-1, 0]), float(o_pts[-1, 1])), 0, False,
                        np.concatenate([[way.speeds[k]], way.speeds[k + 1:]])[: len(o_pts)])
     keep = np.ones(len(full), dtype=bool)
@@ -294,6 +296,21 @@ def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_dis
     full, speeds = full[keep], speeds[: len(keep)][keep]
     pts, cut = truncate(full, start, max_displacement)
     return Route(pts, (gx, gy), goal if goal >= 0 else -1, cut, speeds[: len(pts)], onward, way, by_map)
+
+
+def _next_stretch(linkmap: LinkMap, pts: np.ndarray, at: float, depth: float) -> float:
+    """Metres along ``pts`` a return may go on to when it reached the place the map vouched for (``at``) and the
+    link is still down: into the next separate stretch the map says held the link (past one where it was seen to
+    fail), or nowhere (``at``: it stays). Going on inside one good stretch does not help: the place held the
+    link, so what is missing now is not the place (the station went down, the link is jammed), and every metre
+    more is a metre further from where the operator left the robot."""
+    gap = linkmap.first_reliable(pts, skip=at, poor=True)
+    if gap is None:
+        return at
+    again = linkmap.first_reliable(pts, skip=_along(pts, *gap))
+    if again is None:
+        return at
+    return min(polyline_length(pts), _along(pts, *again) + depth)
 
 
 def continue_from(route: Route, at: tuple[float, float], search: float) -> Route:
