@@ -132,9 +132,15 @@ class ReturnDriver:
 
     def place_holds(self, x: float, y: float) -> bool:
         """Whether a regain may halt the running return at (x, y): yes, unless its route leads to a place the link
-        map vouches for and (x, y) is not such a place (docs/architecture.md §6)."""
+        map vouches for, a short finish away (two cells and the arrival radius), and (x, y) is not such a place
+        (docs/architecture.md §6). Further away the link being back is worth more than the map's caution: on a
+        gradual range fringe the map vouches only for places far back, and the return must not drive there."""
         st = self.service
         if self.vehicle.contingency is not None or st is None or st.route is None or not st.route.by_map:
+            return True
+        params = self.vehicle.params
+        finish = 2.0 * params["LNK_MAP_CELL"] + params["RTL_ARRIVE_R"]
+        if st.path is None or st.path.length - st.progress > finish:
             return True
         return self.vehicle.linkmap.reliable(x, y)
 
