@@ -33,6 +33,8 @@ def add_parser(sub) -> None:
     sh.set_defaults(command_path="shell")
     m = gs.add_parser("map", help="a live map in the browser, served on 127.0.0.1")
     m.add_argument("--port", type=types.LISTEN_PORT, default=8080, help="HTTP port on 127.0.0.1 (0: any free port)")
+    m.add_argument("--linkmap", metavar="FILE", help="draw the link layer from this linkmap.csv (re-read on every "
+                   "refresh; e.g. the one a `sim run` wrote)")
     m.set_defaults(command_path="map")
     g.set_defaults(func=run)
 
@@ -101,9 +103,12 @@ def _run(args: argparse.Namespace) -> int:
 
                 return run_shell(c)
             if path == "map":
+                from pathlib import Path
+
+                from gcs.linkmap_layer import file_source
                 from gcs.mapserver import serve_map
 
-                return serve_map(c, args.port)
+                return serve_map(c, args.port, file_source(Path(args.linkmap)) if args.linkmap else None)
             return execute(Context(c, sys.stdout), args)
     except GcsError as e:
         print(f"returnlink gcs: {e}", file=sys.stderr)

@@ -4,7 +4,8 @@ The page (``gcs/web/``: static HTML, JavaScript and SVG, no build step, nothing 
 for a JSON snapshot and posts lease actions to ``/action/NAME``. Everything it shows reaches the station over
 MAVLink: position from LOCAL_POSITION_NED (the station's own track, ``gcs/track.py``, coloured by the share of
 reports it heard), lease sequence, state, return start and target and displacement from LEASE_STATUS, events from
-LEASE_EVENT, the return plan by the standard mission download. The station is the same long-lived ``Session`` the
+LEASE_EVENT, the return plan by the standard mission download; the link layer from the vehicle's link map
+(``linkmap.csv`` bytes from a ``LinkMapSource``). The station is the same long-lived ``Session`` the
 shell uses, so the link (and the operator's heartbeat) lives as long as the page is served.
 """
 
@@ -20,6 +21,7 @@ from pathlib import Path
 from typing import TextIO
 
 from gcs.client import Client, GcsError
+from gcs.linkmap_layer import LinkMapSource, layer
 from gcs.plans import describe
 from gcs.shell import Session
 from gcs.track import Track, return_route
@@ -42,8 +44,10 @@ def _pair(p: tuple[float, float] | None) -> list[float] | None:
 class MapStation:
     """The station side of the map: the session, the track it builds, and the snapshot the page draws."""
 
-    def __init__(self, client: Client, out: TextIO = sys.stdout) -> None:
+    def __init__(self, client: Client, out: TextIO = sys.stdout, linkmap: LinkMapSource | None = None) -> None:
+        """``linkmap``: where the vehicle's link map comes from (CSV bytes; ``gcs/linkmap_layer.py``)."""
         self.client = client
+        self.linkmap = linkmap
         self.track = Track()
         self.session = Session(client, out)
         self.plan = "not downloaded"
@@ -102,7 +106,7 @@ class MapStation:
                 "trail": [[_num(p.north), _num(p.east), round(p.quality, 2)] for p in self.track.points],
                 "lost": [[_num(p.north), _num(p.east), round(p.t, 1)] for p in self.track.lost],
                 "plan": self.plan, "events": [], "texts": [t for _, t in c.gs.texts[-6:]],
-                "lease": None, "route": [], "circle": None,
+                "lease": None, "route": [], "circle": None, "linkmap": self._linkmap(),
             }
             for e in c.gs.events[-8:]:
                 state["events"].append(f"{e.t:7.1f}  {e.expired} -> {e.current}  {e.reason} ({e.holder})")
@@ -125,6 +129,11 @@ class MapStation:
                     # no return running: how far one would be allowed to go if the link were lost here
                     state["circle"] = {"center": _pair(pos), "radius": _num(self.rtl_max_disp), "kind": "preview"}
             return state
+
+    def _linkmap(self) -> dict | None:
+        """The link layer (None: no source, or it has no map yet)."""
+        data = self.linkmap() if self.linkmap is not None else None
+        return None if data is None else layer(data)
 
     def act(self, name: str) -> tuple[bool, str]:
         with self.session.lock:
@@ -187,8 +196,9 @@ def _handler(station: MapStation) -> type[BaseHTTPRequestHandler]:
 class MapServer:
     """The HTTP side: bound to 127.0.0.1 only (the page can move the robot)."""
 
-    def __init__(self, client: Client, port: int = 8080, out: TextIO = sys.stdout) -> None:
-        self.station = MapStation(client, out)
+    def __init__(self, client: Client, port: int = 8080, out: TextIO = sys.stdout,
+                 linkmap: LinkMapSource | None = None) -> None:
+        self.station = MapStation(client, out, linkmap)
         self.httpd = ThreadingHTTPServer(("127.0.0.1", port), _handler(self.station))
         self.httpd.daemon_threads = True
         self.thread: threading.Thread | None = None
@@ -211,10 +221,10 @@ class MapServer:
         self.station.stop()
 
 
-def serve_map(client: Client, port: int = 8080) -> int:
+def serve_map(client: Client, port: int = 8080, linkmap: LinkMapSource | None = None) -> int:
     """``returnlink gcs map``: serve until Ctrl-C."""
     try:
-        server = MapServer(client, port)
+        server = MapServer(client, port, linkmap=linkmap)
     except OSError as e:
         print(f"returnlink gcs: cannot serve the map on 127.0.0.1:{port}: {e}", file=sys.stderr)
         return 2

@@ -41,6 +41,13 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("LEASE_STALE_TAKE", 1, 0, 1, "", "a silent owner may be taken over", integer=True),
     ParamSpec("LNK_MIN_Q", 0.25, 0.0, 0.9, "",
               "owner's packet delivery below this for LNK_TIMEOUT also counts as lost (0 = silence only)"),
+    ParamSpec("LNK_MAP_CELL", 2.0, 0.5, 20.0, "m", "cell size of the link map (a new size starts a new map)"),
+    ParamSpec("LNK_MAP_CELLS", 1024, 16, 65536, "", "memory bound of the link map (far cells are dropped first)",
+              integer=True),
+    ParamSpec("LNK_MAP_OBS", 3, 1, 1000, "", "observations (0.5 s looks) before a cell can count as reliable",
+              integer=True),
+    ParamSpec("LNK_MAP_MARGIN", 0.3, 0.0, 0.9, "",
+              "a reliable cell's delivery lower bound exceeds LNK_MIN_Q by this"),
 )
 BY_NAME = {s.name: s for s in SPECS}
 

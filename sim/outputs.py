@@ -32,13 +32,31 @@ def summary(run, m: dict) -> str:
     return _modules(run)[0].summary(run, m)
 
 
+def write_linkmap(run, path: Path) -> Path | None:
+    """The vehicle's link map as ``linkmap.csv`` (``link.linkmap_format``), replaced atomically; None for a run
+    whose vehicle keeps no map (the firmware's)."""
+    linkmap = getattr(getattr(run, "vehicle", None), "linkmap", None)
+    if linkmap is None:
+        return None
+    from link.linkmap_format import encode
+    from vehicle.storage import write_atomic
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_atomic(path, encode(linkmap.cells()))
+    return path
+
+
 def write(run, out: Path, plots: bool = True) -> list[Path]:
-    """metrics.json, run.tlog and (unless ``plots`` is off) trajectory.png and timeline.png in ``out``."""
+    """metrics.json, run.tlog, linkmap.csv (a native run) and (unless ``plots`` is off) trajectory.png and
+    timeline.png in ``out``."""
     import importlib
 
     from sim.runner import write_metrics, write_tlog
 
     paths = [write_metrics(run.metrics, out / "metrics.json"), write_tlog(run, out / "run.tlog")]
+    linkmap = write_linkmap(run, out / "linkmap.csv")
+    if linkmap is not None:
+        paths.append(linkmap)
     if plots:
         # matplotlib: about 0.4 CPU-s to import, paid only when plots are drawn
         report = importlib.import_module(_modules(run)[1])

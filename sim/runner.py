@@ -283,7 +283,11 @@ class Run(LeaseRecord):
         op = self._operator
         if not op.alive or op.state is None:
             return
-        data = self.radio_report.frame(op.state, jammed=self._jammed(op.name, t))
+        jammed = self._jammed(op.name, t)
+        if not jammed:
+            # the vehicle's radio measures the same channel: its RSSI goes on the vehicle's link map
+            self.vehicle.radio_rssi(op.state.rssi_dbm)
+        data = self.radio_report.frame(op.state, jammed=jammed)
         op.gs.feed(data, t)
         self._log_frame(data, t)
 

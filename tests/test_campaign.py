@@ -302,7 +302,7 @@ def test_sim_run_param_and_plan_change_the_run(tmp_path, capsys):
     m = json.loads((tmp_path / "a" / "metrics.json").read_text())
     assert m["return_started_s"] - m["link_lost_s"] == pytest.approx(1.0, abs=0.1)
     assert m["distance_back_m"] < 0.5  # a loiter plan holds still instead of driving back
-    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["metrics.json", "run.tlog"]
+    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["linkmap.csv", "metrics.json", "run.tlog"]
     capsys.readouterr()
 
 

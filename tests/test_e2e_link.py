@@ -105,7 +105,11 @@ def test_weak_radio_settles_after_two_cycles(tmp_path, vehicle):
                                                        'vehicle = "rover"': f'vehicle = "{vehicle}"'})
     r, m = mission(str(path))
     assert 1 <= m["link_cycles"] <= 2, m["link_cycles"]
-    assert [b.reason for b in r.blocks] == ["LINK_REGAINED"] * m["link_cycles"]
+    # each chain ends LINK_REGAINED: in its RETURN_TO_LINK block, or (the block parked at the place the link map
+    # vouches for while contact was still building) in the LOITER after it, without moving on
+    ends = [b.reason for b in r.blocks if b.reason != "COMPLETED"]
+    assert ends == ["LINK_REGAINED"] * m["link_cycles"], [b.reason for b in r.blocks]
+    assert all(b.distance < 0.5 for b in r.blocks if b.command == "LOITER")
     assert sum(b.distance for b in r.blocks) <= 15.0, [b.distance for b in r.blocks]
     assert m["regained_by"] == "return" and m["passed"], m.get("failures")
     # at the fringe the quality trigger may call the loss while lucky packets still come: the reaction is measured

@@ -16,6 +16,7 @@ from sim import metrics
 from sim.runner import Run
 from sim.scenario import BUILTIN, load
 from vehicle.app import DT
+from vehicle.lease import Holder
 
 
 @functools.cache
@@ -124,7 +125,12 @@ def test_handover_refuses_the_first_station_after_takeover():
     assert r.vehicle.book.owner == r.scenario.station("bravo").sysid
     assert m["commands_rejected"] > 0 and m["stale_commands_executed"] == 0
     bravo = r.stations["bravo"].gs
-    assert any("return in progress" in text for t, text in bravo.texts if t < 41)  # the first try, mid-return
+    # bravo's first try (t = 40 s): refused while a return holds the lease. With the link map the return parks
+    # near the loss point (alpha's station died there, not the place), and may be over by then: the rule itself
+    # is tests/test_lease.py's test_a_running_return_is_never_taken_over_and_a_silent_owner_after_it_is
+    first_try = next(e.t for e in r.scenario.events if e.action == "takeover")
+    if r.trace.holder[int(round(first_try / DT)) - 1] == int(Holder.RETURN_SERVICE):
+        assert any("return in progress" in text for t, text in bravo.texts if t < first_try + 1)
     alpha = r.stations["alpha"].gs
     assert any("refused" in text for _, text in alpha.texts)  # alpha was told, not silently ignored
     revived = next(e.t for e in r.scenario.events if e.action == "revive_gcs")

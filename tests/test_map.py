@@ -14,6 +14,7 @@ from gcs.client import Client
 from gcs.mapserver import MapServer
 from gcs.plans import parse_spec
 from gcs.track import LOST_GAP, MAX_POINTS, MIN_STEP, Track, return_route
+from link.linkmap_format import encode
 from tests.interop import ServedVehicle, wait_until
 
 CHROMIUM = "/usr/bin/chromium"
@@ -72,7 +73,8 @@ def mapped():
     server = None
     try:
         client.connect(10)
-        server = MapServer(client, 0).start()
+        # the link layer from the simulated vehicle's own map, as the page will get it from the vehicle's file
+        server = MapServer(client, 0, linkmap=lambda: encode(served.vehicle.linkmap.cells())).start()
         yield served, client, server
     finally:
         if server is not None:
@@ -118,6 +120,10 @@ def test_map_page_in_headless_chromium_shows_the_trail_grow_and_rtl(mapped, tmp_
             first = count()
             wait_until(lambda: count() >= first + 5, 15, "the trail to grow on the page")
             assert page.locator("#trail polyline.trail-good").count() >= 1  # a perfect link: all good
+            # the link layer: the vehicle's map of where its owner's packets arrived, every cell good here
+            wait_until(lambda: int(page.get_attribute("#linkmap", "data-count")) >= 2, 15, "the link layer")
+            assert page.locator("#linkmap rect.linkmap-good").count() >= 1
+            assert page.locator("#linkmap rect.linkmap-poor").count() == 0
             with server.station.session.lock:
                 client.stop_driving()
             page.click("#btn-rtl")

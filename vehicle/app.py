@@ -40,6 +40,7 @@ from vehicle.lease import (
     epoch_before,
 )
 from vehicle.lease_terms import State, refused
+from vehicle.linkmap import MapConfig
 from vehicle.params import Params
 from vehicle.service import PlanItem, blocks_from_items, default_plan
 from vehicle.teleop import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, SETPOINT_TTL, Setpoint, velocity_to_command
@@ -90,6 +91,8 @@ class Vehicle:
         # drained by the endpoint)
         self.estimator = self.control.estimator
         self.trail = self.control.trail
+        self.linkmap = self.control.linkmap
+        self._map_owner: int | None = None  # whose packets the link map counts (a new owner has its own rate)
         self.reached = self.returns.reached
 
     # what the parts keep, under the names the endpoint, the telemetry and the simulator read
@@ -153,6 +156,16 @@ class Vehicle:
     def heard(self, sysid: int, t: float, seq: int | None = None) -> None:
         """A frame from ``sysid`` with MAVLink sequence number ``seq``: the owner's feed the link watch."""
         self.book = self.book.heard(sysid, t, seq)
+        if sysid == self.book.owner:
+            if sysid != self._map_owner:
+                self._map_owner = sysid
+                self.linkmap.forget_sender()
+            self.linkmap.packet(t, seq)
+
+    def radio_rssi(self, dbm: float) -> None:
+        """The vehicle's own radio reports the owner's signal strength (a SiK radio's RADIO_STATUS, or the
+        simulator's channel): the link map keeps its mean per place."""
+        self.linkmap.rssi(dbm)
 
     # ----- the root and the execution leases ---------------------------------------------------------------
     def acquire(self, sender: int, compid: int, t: float, allow_takeover: bool) -> Check:
@@ -289,6 +302,8 @@ class Vehicle:
         """Store a parameter (ParamError leaves the old value) and apply it to the rules at once."""
         v = self.params.set(name, value)
         self.book = self.book.with_config(LeaseConfig.from_params(self.params))
+        if name.startswith("LNK_MAP_") or name == "LNK_MIN_Q":
+            self.linkmap.with_config(MapConfig.from_params(self.params))
         if not self.plan_items and name.startswith("RTL_"):
             self.apply(self.book.schedule_plan(self._blocks(default_plan(self.params)), self.t))
         return v

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Protocol
 
 from vehicle.lease import ExecutionLease, ExpireReason, ServiceBlock
 from vehicle.lease_terms import State
+from vehicle.returning import Way
 from vehicle.service import NAV_LOITER_TIME, NAV_WAYPOINT, ServiceState
 from vehicle.service import displacement as block_displacement
 from vehicle.service import start as start_block
@@ -66,6 +67,10 @@ class ReturnDriver:
         self.index: int | None = None  # the lease index that state belongs to
         self.faults = 0  # blocks ended because the service raised (each reported, never fatal)
         self.reached: list[int] = []  # plan items reached (MISSION_ITEM_REACHED), drained by the endpoint
+        # the way back the chain's blocks are on (``returning.Way``): the next block of the chain resumes it
+        self.way: Way | None = None
+        self.way_chain: int | None = None
+        self.saw_loss = False  # the running block has run with the owner's link lost
 
     def stand_down(self) -> None:
         """An operator lease is current: no block runs."""
@@ -80,16 +85,30 @@ class ReturnDriver:
         book = v.book
         link_lost = book.link.lost
         fresh = self.service is None or self.index != cur.index
+        linkmap = v.linkmap
+        if fresh:
+            self.saw_loss = False
+        elif self.deferred(cur, link_lost) and linkmap.reliable(x, y):
+            # heard again short of the place the map vouches for, and now there: the return ends here
+            v.apply(v.book.regained_here(t))
+            return 0.0, 0.0
+        self.saw_loss = self.saw_loss or link_lost
         try:
             if fresh:
-                step = start_block(cur.block, x, y, t, trail, v.params, link_lost, outbound_speed)
+                resume = None
+                if self.way is not None and self.way_chain == cur.chain:
+                    resume = self.way.resumed((x, y), self.way.length)
+                step = start_block(cur.block, x, y, t, trail, v.params, link_lost, outbound_speed, linkmap, resume)
             else:
                 step = step_block(self.service, x, y, yaw, t, trail, v.params, link_lost, outbound_speed,
-                                  slipping=estimator.slipping)
+                                  slipping=estimator.slipping, linkmap=linkmap)
         except Exception as e:  # noqa: BLE001 - the return runs when nobody can restart the vehicle
             return self._fault(cur.index, e, t)
         if fresh:
             self.index = cur.index
+        route = step.state.route
+        if route is not None and route.way is not None:
+            self.way, self.way_chain = route.way, cur.chain
         if step.replanned and book.current_id is not None:
             if not fresh and self.service is not None:
                 self.reached.append(self.service.items[self.service.item].seq)
@@ -99,9 +118,31 @@ class ReturnDriver:
             st = step.state
             if step.finished is ExpireReason.COMPLETED and 0 <= st.item < len(st.items):
                 self.reached.append(st.items[st.item].seq)
-            v.apply(v.book.finish(cur.index, step.finished, t))
+            if self.deferred(cur, link_lost):
+                v.apply(v.book.regained_here(t))  # the link is back and the block has done what it can
+            else:
+                v.apply(v.book.finish(cur.index, step.finished, t))
             return 0.0, 0.0
         return step.speed, step.yaw_rate
+
+    def deferred(self, cur: ExecutionLease, link_lost: bool) -> bool:
+        """A block that halts on regain, has run with the link lost and runs on with it back: LINK_REGAINED came
+        where the map says the link does not hold, and the block is finishing the metres to the place that does."""
+        return self.saw_loss and not link_lost and cur.block is not None and cur.block.halt_on_regain
+
+    def place_holds(self, x: float, y: float) -> bool:
+        """Whether a regain may halt the running return at (x, y): yes, unless its route leads to a place the link
+        map vouches for, a short finish away (two cells and the arrival radius), and (x, y) is not such a place
+        (docs/architecture.md §6). Further away the link being back is worth more than the map's caution: on a
+        gradual range fringe the map vouches only for places far back, and the return must not drive there."""
+        st = self.service
+        if self.vehicle.contingency is not None or st is None or st.route is None or not st.route.by_map:
+            return True
+        params = self.vehicle.params
+        finish = 2.0 * params["LNK_MAP_CELL"] + params["RTL_ARRIVE_R"]
+        if st.path is None or st.path.length - st.progress > finish:
+            return True
+        return self.vehicle.linkmap.reliable(x, y)
 
     def _fault(self, index: int, error: Exception, t: float) -> tuple[float, float]:
         """The return service raised: end its block as STUCK, hold still this tick, and say so."""

@@ -18,6 +18,7 @@ from vehicle.contingency import ReturnDriver
 from vehicle.estimator import Estimator
 from vehicle.io import Readings
 from vehicle.lease import ExecutionLease, Holder, LeaseBook, Verdict
+from vehicle.linkmap import LinkMap, MapConfig
 from vehicle.teleop import Setpoint
 from vehicle.trail import Crumb, Trail, TrailConfig
 
@@ -37,6 +38,7 @@ class ControlLoop:
         self.returns = returns
         self.estimator = Estimator(x, y, yaw, t, pos_std=0.3, yaw_std=0.02)
         self.trail = Trail(TrailConfig.from_params(vehicle.params))
+        self.linkmap = LinkMap(MapConfig.from_params(vehicle.params))  # the owner's link over space
         self.readings: Readings | None = None
         self._crumbs: deque[Crumb] = deque()  # recorded, waiting for their link tag to be final
         self.last_fix: tuple[float, float] | None = None  # the last fix used, for GPS_RAW_INT
@@ -63,13 +65,16 @@ class ControlLoop:
         if fix is not None and est.fix(fix.x, fix.y, fix.std):
             self.last_fix, self.last_fix_t = (fix.x, fix.y), t
         p = est.pose
+        self.linkmap.at(t, p.x, p.y)
         book = v.book
         good = self.link_is_good = v.link_good(t)
         if v.contingency is not None:
             v.contingency.observe(v, t)
         self._crumbs.append(Crumb(p.x, p.y, t, p.std, good, math.nan))
 
-        out = book.tick_changes(t)  # (None on most ticks: nothing happened)
+        # a regain halts a return only where the link map says the link holds (asked only while the link is lost)
+        holds = not book.link.lost or self.returns.place_holds(p.x, p.y)
+        out = book.tick_changes(t, holds)  # (None on most ticks: nothing happened)
         if out is not None:
             v.apply(out)
         cur = v.book.current

@@ -173,15 +173,22 @@ class LeaseBook:
         out = self.tick_changes(t)
         return Outcome(self) if out is None else out
 
-    def tick_changes(self, t: float) -> Outcome | None:
+    def tick_changes(self, t: float, place_holds: bool = True) -> Outcome | None:
         """``tick``, with None for "the same book, nothing happened": the answer of nearly every 20 ms tick, for
-        which the vehicle loop then builds no ``Outcome``."""
+        which the vehicle loop then builds no ``Outcome``. ``place_holds`` False: the link map says the link does
+        not reliably hold where the robot is, so a regain does not halt the running return there
+        (``lease_ledger.on_link``)."""
         if self.owner is None:
             return None
         link, trigger = self.link.step(t)
         if trigger is Trigger.NONE:
             return None if link is self.link else Outcome(replace(self, link=link))
-        return lease_ledger.on_link(self, link, trigger, t)
+        return lease_ledger.on_link(self, link, trigger, t, place_holds)
+
+    def regained_here(self, t: float) -> Outcome:
+        """A return that heard its owner again where the map said the link does not hold has reached a place that
+        does: its chain ends now, as LINK_REGAINED (``lease_ledger.regained_here``)."""
+        return lease_ledger.regained_here(self, t)
 
     # ----- the execution-lease sequence (lease_ledger) -----------------------------------------------------
     def claim(self, sysid: int, epoch: int, index: int, t: float) -> tuple[Outcome, Check]:

@@ -131,10 +131,14 @@ def enqueue(book: LeaseBook, command: QueuedCommand) -> LeaseBook:
 
 
 # ----- the owner's link --------------------------------------------------------------------------------------
-def on_link(book: LeaseBook, link: LinkWatch, trigger: Trigger, t: float) -> Outcome:
+def on_link(book: LeaseBook, link: LinkWatch, trigger: Trigger, t: float, place_holds: bool = True) -> Outcome:
     """Consume a trigger of the owner's link watch (§3.5): LOST expires a current operator lease (COMMS_LOST);
     REGAINED ends a service block that halts on regain and the rest of its chain (LINK_REGAINED), and otherwise
-    re-arms the plan behind the operator lease now that the link is up again."""
+    re-arms the plan behind the operator lease now that the link is up again.
+
+    Where the link map says the link does not reliably hold (``place_holds`` False, docs/architecture.md §6) the
+    regain is taken (the watch is no longer lost) but the halting block runs on to the place that does; the
+    vehicle then ends the chain there with ``regained_here``."""
     new = replace(book, link=link)
     cur = new.leases[0]
     if trigger is Trigger.LOST:
@@ -142,8 +146,20 @@ def on_link(book: LeaseBook, link: LinkWatch, trigger: Trigger, t: float) -> Out
             return advance(new, t, ExpireReason.COMMS_LOST)
         return Outcome(new)
     if cur.holder is Holder.RETURN_SERVICE and cur.block is not None and cur.block.halt_on_regain:
+        if not place_holds:
+            return Outcome(new)
         return _end_chain(new, t, ExpireReason.LINK_REGAINED)
     return Outcome(arm(new, t))
+
+
+def regained_here(book: LeaseBook, t: float) -> Outcome:
+    """LINK_REGAINED, deferred by ``on_link`` to a place the map vouches for: the current halting block and its
+    chain end now, if the link is still up (lost again, the next regain decides afresh)."""
+    cur = book.leases[0] if book.leases else None
+    if (cur is None or cur.holder is not Holder.RETURN_SERVICE or cur.block is None or not cur.block.halt_on_regain
+            or book.link.lost):
+        return Outcome(book)
+    return _end_chain(book, t, ExpireReason.LINK_REGAINED)
 
 
 # ----- how the sequence moves on -------------------------------------------------------------------------------

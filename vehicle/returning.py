@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vehicle.linkmap import LinkMap
 from vehicle.trail import Trail
 
 SPEED_RANGE = (0.3, 2.0)  # m/s: stretch speeds worth copying (a crawl is a pause; beyond the teleop limit, a glitch)
@@ -34,6 +35,8 @@ class Route:
     truncated: bool  # cut where it first leaves the max-displacement circle (FIG. 4C)
     speeds: np.ndarray | None = None  # per point: the speed driven outbound on the stretch leaving it (m/s)
     onward: Route | None = None  # LINK after a loss: the trail from the target back to its start (dead zones)
+    way: Way | None = None  # the whole way back this route was cut from: the next block of a chain resumes it
+    by_map: bool = False  # the target is the nearest place the link map says reliably holds
 
     @property
     def length(self) -> float:
@@ -42,6 +45,65 @@ class Route:
     @property
     def end(self) -> tuple[float, float]:
         return float(self.points[-1, 0]), float(self.points[-1, 1])
+
+
+@dataclass(frozen=True)
+class Way:
+    """The whole way back along the trail from where a return began: the trail retraced (loops pruned) to its start,
+    with the outbound speed of each stretch and how far along it the crumbs' link target lies.
+
+    Consecutive blocks of one return chain resume the way where the robot has got to on it, instead of retracing
+    the trail again: the newest crumbs are the previous block's own, laid heading back, and retracing them would
+    drive the robot forward over the stretch it had just returned along (issue 21: 7.4 m of path for 2.8 m)."""
+
+    points: np.ndarray
+    speeds: np.ndarray
+    goal: float  # metres along ``points`` to the crumb target (the last link-good crumb before the loss)
+
+    @property
+    def length(self) -> float:
+        return polyline_length(self.points)
+
+    def resumed(self, at: tuple[float, float], search: float) -> Way:
+        """The rest of the way from the point nearest ``at`` within its first ``search`` metres."""
+        pts = self.points
+        if len(pts) < 2:
+            return Way(np.array([at], dtype=float), self.speeds[:1], 0.0)
+        p = np.asarray(at, dtype=float)
+        best, best_d, best_s, walked = (0, pts[0]), math.inf, 0.0, 0.0
+        for k in range(len(pts) - 1):
+            q = _closest_on_segment(p, pts[k], pts[k + 1])
+            d = float(np.hypot(*(q - p)))
+            if d < best_d:
+                best, best_d, best_s = (k, q), d, walked + float(np.hypot(*(q - pts[k])))
+            walked += float(np.hypot(*(pts[k + 1] - pts[k])))
+            if walked > search:
+                break
+        k, q = best
+        out = np.vstack([p, q, pts[k + 1:]])
+        sp = np.concatenate([[self.speeds[k], self.speeds[k]], self.speeds[k + 1:]])
+        keep = np.ones(len(out), dtype=bool)
+        keep[1:] = np.hypot(*np.diff(out, axis=0).T) > 1e-9
+        return Way(out[keep], sp[keep], max(0.0, self.goal - best_s) + (best_d if self.goal > best_s else 0.0))
+
+
+def _cut(pts: np.ndarray, at: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """Polyline ``pts`` split ``at`` metres along it: (head up to the cut, tail from it, index of the segment cut)."""
+    walked = 0.0
+    for k in range(len(pts) - 1):
+        seg = float(np.hypot(*(pts[k + 1] - pts[k])))
+        if walked + seg >= at:
+            u = (at - walked) / seg if seg > 1e-12 else 0.0
+            c = pts[k] + u * (pts[k + 1] - pts[k])
+            return np.vstack([pts[: k + 1], c]), np.vstack([c, pts[k + 1:]]), k
+        walked += seg
+    return pts.copy(), pts[-1:].copy(), max(0, len(pts) - 2)
+
+
+def _along(pts: np.ndarray, k: int, u: float) -> float:
+    """Metres along polyline ``pts`` to fraction ``u`` of segment ``k``."""
+    d = np.hypot(*np.diff(pts[: k + 2], axis=0).T) if len(pts) > 1 else np.zeros(0)
+    return float(d[:k].sum() + u * (d[k] if k < len(d) else 0.0))
 
 
 def polyline_length(points: np.ndarray) -> float:
@@ -171,40 +233,84 @@ def _head(pts: np.ndarray, dist: float) -> list[np.ndarray]:
 
 
 def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_displacement: float,
-               link_lost: bool, heading: float = 0.0, overshoot: float = 0.0) -> Route:
+               link_lost: bool, heading: float = 0.0, overshoot: float = 0.0, linkmap: LinkMap | None = None,
+               resume: Way | None = None, map_depth: float = 0.0) -> Route:
     """The whole planning step: target, retraced route, displacement bound.
 
-    ``overshoot`` extends a LINK route that far past the target crumb, further back along the trail: the
-    navigator counts as arrived within RTL_ARRIVE_R of the route's end, and a return that stops that short of
-    the last place the operator was heard stops on the fringe of coverage, not inside it.
+    The way back is the trail retraced from ``start`` to its first crumb (loops pruned), or ``resume``, the way an
+    earlier block of the same chain was on, picked up where the robot is: a chain never drives a stretch twice.
 
-    A LINK route after a loss also carries ``onward``: the trail from the target back to its start, which the
-    service follows when the target turns out to be a dead zone (docs/architecture.md §6).
+    LINK after a loss: the target is the nearest place back along the way, at or beyond the last link-good crumb,
+    that ``linkmap`` says reliably holds the link, ``map_depth`` metres into it (a place on the fringe of a good cell
+    is still the fringe); with no such place, the last link-good crumb itself, ``overshoot`` metres further back
+    (the navigator counts as arrived within RTL_ARRIVE_R of the route's end, and the tag lags the link). The route
+    also carries ``onward``: the way beyond the target, which the service follows when the target turns out to be
+    a dead zone (docs/architecture.md §6). Otherwise (ORIGIN, or a return commanded over a good link): the trail's
+    start. The route is cut where it first leaves the displacement circle (FIG. 4C).
     """
     if target is Target.HEADING:
         s = np.asarray(start, dtype=float)
         end = s + max_displacement * np.array([math.cos(heading), math.sin(heading)])
         return Route(np.array([s, end]), (float(end[0]), float(end[1])), -1, True)
-    good = trail.link_good()
-    goal = target_index(good, target, link_lost)
-    if goal < 0:
-        s = np.asarray(start, dtype=float)
-        return Route(np.array([s]), None, -1, False)
-    full, idx = _retrace(trail, start, goal)
-    speeds = outbound_speeds(trail, idx)
-    gx, gy = full[-1]
+    if resume is not None:
+        way = resume
+        goal = -1
+    else:
+        good = trail.link_good()
+        goal = target_index(good, target, link_lost)
+        if goal < 0:
+            s = np.asarray(start, dtype=float)
+            return Route(np.array([s]), None, -1, False)
+        # to the crumb target (shortcuts never jump past it), then on from it to the trail's start
+        pts, idx = _retrace(trail, start, goal)
+        at_goal = polyline_length(pts)
+        if goal > 0:
+            more, more_idx = _retrace(trail, (float(pts[-1, 0]), float(pts[-1, 1])), 0, first=goal)
+            pts, idx = np.vstack([pts, more[1:]]), np.concatenate([idx, more_idx[1:]])
+        way = Way(pts, outbound_speeds(trail, idx), at_goal)
+    lost_link = target is Target.LINK and link_lost
+    total = way.length
+    onward_to = total  # how far along the way a block that arrives with the link still down may go on
+    if not lost_link:
+        at, by_map, extra = total, False, 0.0
+    else:
+        at, by_map, extra = way.goal, False, overshoot
+        if linkmap is not None:
+            hit = linkmap.first_reliable(way.points, skip=way.goal)
+            if hit is not None:
+                at, by_map, extra = _along(way.points, *hit), True, map_depth
+                onward_to = _next_stretch(linkmap, way.points, at, map_depth)
+    at = min(at, total)
+    head, _, k = _cut(way.points, at)
+    gx, gy = float(head[-1, 0]), float(head[-1, 1])
+    full, tail, k2 = _cut(way.points, min(total, at + extra))
+    # a point's speed is that of the stretch leaving it: the cut point drives on at its segment's
+    speeds = np.concatenate([way.speeds[: k2 + 1], [way.speeds[k2]]])
     onward = None
-    if target is Target.LINK and link_lost:
-        # further back means along the retraced trail (shortcuts taken), not down the list of crumbs: the newest
-        # of those may have been laid by an earlier return, heading the other way
-        o_pts, o_idx = _retrace(trail, (float(gx), float(gy)), 0, first=goal)
-        onward = Route(o_pts, (float(o_pts[-1, 0]), float(o_pts[-1, 1])), 0, False, outbound_speeds(trail, o_idx))
-        extra = _head(o_pts, overshoot) if overshoot > 0 else []
-        if extra:
-            full = np.vstack([full, extra])
-            speeds = np.concatenate([speeds, np.full(len(extra), speeds[-1])])
+    if lost_link and onward_to > at + extra:
+        o_pts = _cut(_cut(way.points, onward_to)[0], at)[1]
+        onward = Route(o_pts, (float(o_pts[-1, 0]), float(o_pts[-1, 1])), 0, False,
+                       np.concatenate([[way.speeds[k]], way.speeds[k + 1:]])[: len(o_pts)])
+    keep = np.ones(len(full), dtype=bool)
+    keep[1:] = np.hypot(*np.diff(full, axis=0).T) > 1e-9
+    full, speeds = full[keep], speeds[: len(keep)][keep]
     pts, cut = truncate(full, start, max_displacement)
-    return Route(pts, (float(gx), float(gy)), goal, cut, speeds[:len(pts)], onward)
+    return Route(pts, (gx, gy), goal if goal >= 0 else -1, cut, speeds[: len(pts)], onward, way, by_map)
+
+
+def _next_stretch(linkmap: LinkMap, pts: np.ndarray, at: float, depth: float) -> float:
+    """Metres along ``pts`` a return may go on to when it reached the place the map vouched for (``at``) and the
+    link is still down: into the next separate stretch the map says held the link (past one where it was seen to
+    fail), or nowhere (``at``: it stays). Going on inside one good stretch does not help: the place held the
+    link, so what is missing now is not the place (the station went down, the link is jammed), and every metre
+    more is a metre further from where the operator left the robot."""
+    gap = linkmap.first_reliable(pts, skip=at, poor=True)
+    if gap is None:
+        return at
+    again = linkmap.first_reliable(pts, skip=_along(pts, *gap))
+    if again is None:
+        return at
+    return min(polyline_length(pts), _along(pts, *again) + depth)
 
 
 def continue_from(route: Route, at: tuple[float, float], search: float) -> Route:

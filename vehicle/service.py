@@ -25,9 +25,10 @@ from link.plan_items import (  # the MAV_CMD numbers of the items a plan may hol
     check_fields,
 )
 from vehicle.lease import ExpireReason, ServiceBlock
+from vehicle.linkmap import LinkMap
 from vehicle.navigation import FollowerConfig, Path, follow
 from vehicle.params import Params
-from vehicle.returning import LINK_TAG_LAG_S, SPEED_RANGE, Route, Target, continue_from, plan_route, truncate
+from vehicle.returning import LINK_TAG_LAG_S, SPEED_RANGE, Route, Target, Way, continue_from, plan_route, truncate
 from vehicle.trail import Trail
 
 SUPPORTED = (NAV_WAYPOINT, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_RETURN_TO_LINK)
@@ -122,14 +123,16 @@ STUCK_AFTER = 15.0  # s without getting closer to the end of the route
 
 
 def start(block: ServiceBlock, x: float, y: float, t: float, trail: Trail, params: Params, link_lost: bool,
-          outbound_speed: float) -> ServiceStep:
+          outbound_speed: float, linkmap: LinkMap | None = None, resume: Way | None = None) -> ServiceStep:
+    """Start a block. ``linkmap``: where the link reliably held (targets, docs/architecture.md §6); ``resume``: the
+    way back the previous block of this chain was on, which a RETURN_TO_LINK with the link still lost picks up."""
     items: tuple[PlanItem, ...] = block.payload
     st = ServiceState(items, -1, t, t, (x, y), None, None, 0.0, 0.0, 0.0, math.inf, t)
-    return _next_item(st, x, y, t, trail, params, link_lost, outbound_speed)
+    return _next_item(st, x, y, t, trail, params, link_lost, outbound_speed, linkmap, resume)
 
 
 def _next_item(st: ServiceState, x: float, y: float, t: float, trail: Trail, params: Params, link_lost: bool,
-               outbound_speed: float) -> ServiceStep:
+               outbound_speed: float, linkmap: LinkMap | None = None, resume: Way | None = None) -> ServiceStep:
     k = st.item + 1
     if k >= len(st.items):
         return ServiceStep(st, 0.0, 0.0, ExpireReason.COMPLETED)
@@ -146,8 +149,12 @@ def _next_item(st: ServiceState, x: float, y: float, t: float, trail: Trail, par
         # past the target crumb by the arrival radius (arrival then means reaching it) and by the distance the
         # tag lags behind the link: the quality behind it averages over LINK_TAG_LAG_S of outbound driving
         overshoot = params["RTL_ARRIVE_R"] + (outbound_speed or speed) * LINK_TAG_LAG_S
+        # a place the map vouches for: past its edge by the arrival radius and half a cell, so the robot stops
+        # inside the place that holds, not on its fringe
+        depth = params["RTL_ARRIVE_R"] + 0.5 * params["LNK_MAP_CELL"]
         route = plan_route(trail, (x, y), target, remaining, link_lost, heading=math.radians(it.x),
-                           overshoot=overshoot)
+                           overshoot=overshoot, linkmap=linkmap, resume=resume if link_lost else None,
+                           map_depth=depth)
         if target is not Target.HEADING:
             route = _bounded_from(route, st.start, max_disp)
     elif it.command == NAV_RETURN_TO_LAUNCH:
@@ -202,7 +209,8 @@ def _bounded_from(route: Route, center: tuple[float, float], radius: float) -> R
 
 
 def step(st: ServiceState, x: float, y: float, yaw: float, t: float, trail: Trail, params: Params,
-         link_lost: bool, outbound_speed: float, slipping: bool = False) -> ServiceStep:
+         link_lost: bool, outbound_speed: float, slipping: bool = False,
+         linkmap: LinkMap | None = None) -> ServiceStep:
     """One control tick of the current block. ``slipping``: the estimator finds the odometry inconsistent (wheels
     spinning against a wall), so the estimated progress is not real and the block ends STUCK rather than
     "arriving" at a target it never reached."""
@@ -214,10 +222,10 @@ def step(st: ServiceState, x: float, y: float, yaw: float, t: float, trail: Trai
         return ServiceStep(st, 0.0, 0.0, ExpireReason.STUCK)
     if it.command == NAV_LOITER_TIME:
         if t - st.item_started_at >= it.param1:
-            return _next_item(st, x, y, t, trail, params, link_lost, outbound_speed)
+            return _next_item(st, x, y, t, trail, params, link_lost, outbound_speed, linkmap)
         return ServiceStep(st, 0.0, 0.0)
     if st.path is None:
-        return _next_item(st, x, y, t, trail, params, link_lost, outbound_speed)
+        return _next_item(st, x, y, t, trail, params, link_lost, outbound_speed, linkmap)
     if st.onward and not link_lost:
         # past a dead-zone target only for want of the link: it is back (a block that continues on regain)
         return ServiceStep(st, 0.0, 0.0, ExpireReason.COMPLETED)
@@ -227,7 +235,8 @@ def step(st: ServiceState, x: float, y: float, yaw: float, t: float, trail: Trai
         onward = _go_on(replace(st, progress=cmd.progress), x, y, t, params, link_lost)
         if onward is not None:
             return ServiceStep(onward, 0.0, 0.0, replanned=True)
-        return _next_item(replace(st, progress=cmd.progress), x, y, t, trail, params, link_lost, outbound_speed)
+        return _next_item(replace(st, progress=cmd.progress), x, y, t, trail, params, link_lost, outbound_speed,
+                          linkmap)
     if cmd.remaining < st.best_remaining - 0.2:
         st = replace(st, best_remaining=cmd.remaining, last_progress_at=t)
     elif t - st.last_progress_at >= STUCK_AFTER:

@@ -68,6 +68,23 @@ function drawTrail(v, trail) {
   }
 }
 
+// The vehicle's link map: one square per cell, coloured by the share of the owner's packets delivered there.
+function drawLinkMap(v, lm) {
+  const g = $("linkmap"); clear(g);
+  const cells = lm && lm.cells ? lm.cells : [];
+  g.setAttribute("data-count", String(cells.length));
+  if (!cells.length) return;
+  const side = lm.cell * v.scale;
+  for (const [n, e, q, obs] of cells) {
+    const cls = q === null ? "unknown" : qualityClass(q);
+    const r = el("rect", { x: v.x(e) - side / 2, y: v.y(n) - side / 2, width: side, height: side,
+                           fill: q === null ? "#7f8c8d" : COLOURS[cls], "fill-opacity": 0.28, stroke: "none",
+                           class: `linkmap-${cls}` }, g);
+    el("title", {}, r).textContent = q === null ? `no packets expected (${obs} obs)`
+      : `delivery ${(100 * q).toFixed(0)} % (${obs} obs)`;
+  }
+}
+
 function drawRobot(v, pos, yaw) {
   const g = $("robot"); clear(g);
   if (!pos) return;
@@ -87,6 +104,7 @@ function draw(s) {
   // the displacement circle is not fitted: at 50 m it would shrink a short trail to a dot
   const v = makeView(pts);
   drawGrid(v);
+  drawLinkMap(v, s.linkmap);
 
   const cg = $("circle"); clear(cg);
   if (s.circle) {
