@@ -34,7 +34,7 @@ def add_parser(sub) -> None:
     m = gs.add_parser("map", help="a live map in the browser, served on 127.0.0.1")
     m.add_argument("--port", type=types.LISTEN_PORT, default=8080, help="HTTP port on 127.0.0.1 (0: any free port)")
     m.add_argument("--linkmap", metavar="FILE", help="draw the link layer from this linkmap.csv (re-read on every "
-                   "refresh; e.g. the one a `sim run` wrote)")
+                   "refresh; e.g. the one a `sim run` wrote) instead of fetching the vehicle's over MAVLink FTP")
     m.set_defaults(command_path="map")
     g.set_defaults(func=run)
 
@@ -105,10 +105,11 @@ def _run(args: argparse.Namespace) -> int:
             if path == "map":
                 from pathlib import Path
 
-                from gcs.linkmap_layer import file_source
+                from gcs.linkmap_layer import VehicleSource, file_source
                 from gcs.mapserver import serve_map
 
-                return serve_map(c, args.port, file_source(Path(args.linkmap)) if args.linkmap else None)
+                source = file_source(Path(args.linkmap)) if args.linkmap else VehicleSource(c.gs)
+                return serve_map(c, args.port, source)
             return execute(Context(c, sys.stdout), args)
     except GcsError as e:
         print(f"returnlink gcs: {e}", file=sys.stderr)

@@ -1,10 +1,10 @@
 """The link layer of the live map: the vehicle's link map (``linkmap.csv``, ``link/linkmap_format.py``) as the page
 draws it.
 
-The page's data comes from whatever gives the station the CSV bytes: today a file a simulator run wrote, or the
-simulator's own state (``returnlink gcs map --linkmap FILE``); a vehicle serving the file over MAVLink FTP plugs in
-the same way, as one more source of bytes. This module only turns bytes into the layer, so every source shares it.
-Pure: bytes in, plain lists out.
+The page's data comes from whatever gives the station the CSV bytes: the vehicle itself, which offers the file over
+MAVLink FTP (``vehicle_source``, what ``returnlink gcs map`` uses), or a file a simulator run wrote
+(``returnlink gcs map --linkmap FILE``). This module turns bytes into the layer, so every source shares it: bytes
+in, plain lists out.
 """
 
 from __future__ import annotations
@@ -12,9 +12,15 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from link.linkmap_format import LinkMapFormatError, MapCell, decode
+from gcs.file_transfer import Download
+from link.linkmap_format import FILE_NAME, LinkMapFormatError, MapCell, decode
 
+if TYPE_CHECKING:
+    from gcs.station import GroundStation
+
+FETCH_PERIOD = 5.0  # s between fetches of the vehicle's map (a few kB each)
 LinkMapSource = Callable[[], bytes | None]  # the current linkmap.csv, or None while there is none
 
 
@@ -52,3 +58,26 @@ def file_source(path: Path) -> LinkMapSource:
             return None
 
     return read
+
+
+class VehicleSource:
+    """The vehicle's own link map over MAVLink FTP: a fresh download every FETCH_PERIOD s of the station's clock,
+    the last whole file given meanwhile (None until one has arrived; a vehicle without the file stays None).
+
+    Called by the map page under the session's lock; the station's loop carries the transfer."""
+
+    def __init__(self, gs: GroundStation, period: float = FETCH_PERIOD) -> None:
+        self.gs, self.period = gs, period
+        self.last: bytes | None = None
+        self.download: Download | None = None
+        self.started = -math.inf
+
+    def __call__(self) -> bytes | None:
+        d = self.download
+        if d is not None and d.done:
+            if d.ok:
+                self.last = bytes(d.data)
+            self.download = None
+        if self.download is None and self.gs.t - self.started >= self.period:
+            self.download, self.started = self.gs.fetch(FILE_NAME), self.gs.t
+        return self.last

@@ -20,6 +20,7 @@ import math
 from collections.abc import Iterable
 from typing import NamedTuple
 
+FILE_NAME = "linkmap.csv"  # the name the vehicle offers it under over MAVLink FTP, and sim run writes it under
 COLUMNS = ("north", "east", "observations", "expected", "delivered", "delivery", "lower", "rssi_dbm", "last_s")
 HEADER = ",".join(COLUMNS)
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from link.linkmap_format import FILE_NAME
+
 
 def _modules(run):
     from sim.firmware.run import FirmwareRun
@@ -39,7 +41,7 @@ def write_linkmap(run, path: Path) -> Path | None:
     if linkmap is None:
         return None
     from link.linkmap_format import encode
-    from vehicle.storage import write_atomic
+    from link.storage import write_atomic
 
     path.parent.mkdir(parents=True, exist_ok=True)
     write_atomic(path, encode(linkmap.cells()))
@@ -54,7 +56,7 @@ def write(run, out: Path, plots: bool = True) -> list[Path]:
     from sim.runner import write_metrics, write_tlog
 
     paths = [write_metrics(run.metrics, out / "metrics.json"), write_tlog(run, out / "run.tlog")]
-    linkmap = write_linkmap(run, out / "linkmap.csv")
+    linkmap = write_linkmap(run, out / FILE_NAME)
     if linkmap is not None:
         paths.append(linkmap)
     if plots:

@@ -16,6 +16,7 @@ from gcs.client import Client, GcsError
 from gcs.commands import COMMANDS
 from gcs.shell import Session, line_parser
 from link import dialect
+from link.linkmap_format import decode
 from sim.cli import main
 from sim.driver import SimDriver
 from sim.scenario import load
@@ -178,6 +179,15 @@ def test_a_file_the_vehicle_does_not_offer_is_named_not_a_time_out(served, capsy
     assert main([*url, "file", "get", "@PARAM/param.pck"]) == 1
     err = capsys.readouterr().err
     assert "file @PARAM/param.pck: file not found" in err and "timed out" not in err
+
+
+def test_file_get_saves_the_vehicles_link_map_as_it_has_it(served, tmp_path, capsys):
+    url = ["gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}"]
+    out = tmp_path / "linkmap.csv"
+    assert main([*url, "file", "get", "linkmap.csv", str(out)]) == 0
+    cells = decode(out.read_bytes())  # a whole linkmap.csv: its header and a row per cell the robot has been in
+    assert cells and all(math.isfinite(c.north) and math.isfinite(c.east) for c in cells)
+    assert f"saved {out.stat().st_size} bytes of linkmap.csv" in capsys.readouterr().out
 
 
 def test_param_set_to_nan_is_reported_refused_not_done(served, capsys):

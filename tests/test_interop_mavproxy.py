@@ -6,6 +6,7 @@ import time
 
 import pytest
 
+from link.linkmap_format import decode
 from tests.interop import MAVProxy, ServedVehicle, wait_until
 from vehicle.app import State
 from vehicle.params import SPECS
@@ -55,3 +56,20 @@ def test_wp_load_schedules_the_plan_and_mode_rtl_returns(mavproxy, tmp_path):
     wait_until(lambda: "DO_SET_MODE: ACCEPTED" in log.read_text(), 10, "DO_SET_MODE accepted")
     wait_until(lambda: served.vehicle.state() in (State.RETURNING, State.HOLDING), 5, "the return plan to run")
     assert any(e.reason.name == "OPERATOR_EXPIRE" for e in served.vehicle.event_log)
+
+
+def test_mavproxy_fetches_the_link_map_over_ftp(tmp_path):
+    """MAVProxy's own FTP client reads linkmap.csv; with FTP loaded it asks for @PARAM/param.pck first, is told
+    FileNotFound, and still gets every parameter by the parameter protocol."""
+    served = ServedVehicle("tunnel")
+    mp = MAVProxy(served.gcs_port, tmp_path, "ftp,param,link")
+    try:
+        mp.wait_for_parameters(len(SPECS))
+        out = tmp_path / "fetched.csv"
+        mp.say(f"ftp get linkmap.csv {out}")
+        wait_until(lambda: out.is_file() and out.stat().st_size > 0, 20, "MAVProxy to save linkmap.csv")
+        cells = decode(out.read_bytes())
+        assert cells and cells[0].observations >= 0
+    finally:
+        mp.close()
+        served.close()

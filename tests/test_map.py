@@ -11,10 +11,10 @@ import urllib.request
 import pytest
 
 from gcs.client import Client
+from gcs.linkmap_layer import VehicleSource
 from gcs.mapserver import MapServer
 from gcs.plans import parse_spec
 from gcs.track import LOST_GAP, MAX_POINTS, MIN_STEP, Track, return_route
-from link.linkmap_format import encode
 from tests.interop import ServedVehicle, wait_until
 
 CHROMIUM = "/usr/bin/chromium"
@@ -73,8 +73,8 @@ def mapped():
     server = None
     try:
         client.connect(10)
-        # the link layer from the simulated vehicle's own map, as the page will get it from the vehicle's file
-        server = MapServer(client, 0, linkmap=lambda: encode(served.vehicle.linkmap.cells())).start()
+        # the link layer as `returnlink gcs map` gets it: the vehicle's own linkmap.csv over MAVLink FTP
+        server = MapServer(client, 0, linkmap=VehicleSource(client.gs)).start()
         yield served, client, server
     finally:
         if server is not None:

@@ -164,3 +164,13 @@ def test_the_ground_client_reports_a_file_the_vehicle_does_not_offer():
     for reply in kit.send(srv, kit.parse(sent.pop())):
         client.on_file_transfer_protocol(reply, 0.1)
     assert d.done and not d.ok and "file not found" in d.error
+
+
+def test_an_open_keeps_the_clients_session_number_when_it_is_free():
+    """MAVProxy picks its session number and ignores an answer for any other (ArduPilot's server keeps it)."""
+    kit = Kit()
+    srv = server(kit, **{"linkmap.csv": CONTENT})
+    (a,) = answers(kit.send(srv, request(1, ftp.OP_OPEN_FILE_RO, b"linkmap.csv\0", session=111)))
+    assert (a.opcode, a.session) == (ftp.OP_ACK, 111)
+    (b,) = answers(kit.send(srv, request(3, ftp.OP_OPEN_FILE_RO, b"linkmap.csv\0", session=111)))
+    assert b.opcode == ftp.OP_ACK and b.session != 111  # taken: another one

@@ -91,9 +91,11 @@ class FtpServer(Service):
         make = self.files.get(path_of(p.data))
         if make is None:
             return nak(p, ftp.ERR_FILE_NOT_FOUND)
-        free = next((s for s in range(MAX_SESSIONS) if s not in self.sessions), None)
-        if free is None:
+        if len(self.sessions) >= MAX_SESSIONS:
             return nak(p, ftp.ERR_NO_SESSIONS)
+        # the client's own session number when it is free (ArduPilot's server keeps it, and MAVProxy ignores an
+        # answer for another session), else the lowest free one (what PX4's server hands out)
+        free = p.session if p.session not in self.sessions else min(set(range(256)) - set(self.sessions))
         try:
             content = make()
         except Exception:  # noqa: BLE001 - a file that cannot be made now is a failed open, never a fault

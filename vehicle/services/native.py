@@ -9,10 +9,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from link.linkmap_format import FILE_NAME, encode
+from vehicle.app import Vehicle
 from vehicle.services.actions import VehicleActions
 from vehicle.services.base import Parts, Service, mav
 from vehicle.services.commands import CommandServer
-from vehicle.services.ftp import FtpServer
+from vehicle.services.ftp import Files, FtpServer
 from vehicle.services.mission import MissionService
 from vehicle.services.operator import OperatorControl
 from vehicle.services.params import ParamServer
@@ -34,7 +36,14 @@ def vehicle_services(p: Parts, *, rates: Mapping[int, float] = DEFAULT_RATES, dr
     missions = MissionService(p.out, p.vehicle, p.origin, telemetry.emit)
     teleop = [Teleop(p.out, p.vehicle, p.counters, p.sysid)] if drives else []
     return [OperatorControl(p.out, p.vehicle, p.boot_t), missions, p.signing, telemetry,
-            ParamServer(p.out, p.vehicle, p.param_file), *teleop, VehicleActions(p.out, p.vehicle), FtpServer(p.out)]
+            ParamServer(p.out, p.vehicle, p.param_file), *teleop, VehicleActions(p.out, p.vehicle),
+            FtpServer(p.out, vehicle_files(p.vehicle))]
+
+
+def vehicle_files(vehicle: Vehicle) -> Files:
+    """What a vehicle offers as files over MAVLink FTP: its link map (docs/architecture.md §6), made when a station
+    opens it."""
+    return {FILE_NAME: lambda: encode(vehicle.linkmap.cells())}
 
 
 # the service classes of the native composition, with the command server every composition has
