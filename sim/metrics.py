@@ -21,7 +21,7 @@ KEYS = ("scenario", "vehicle", "seed", "sim_duration_s", "link_lost_s", "return_
         "trail_max_deviation_m", "real_time_factor", "lease_events", "passed", "failures",
         # added compatibly (docs/architecture.md §7, §9)
         "policy", "loss_position", "rest_position", "rest_link_quality", "link_cycles", "regained_by",
-        "collisions_during_return", "return_speed_mps", "blocks", "frames")
+        "collisions_during_return", "return_speed_mps", "blocks", "frames", "relapses")
 FRAMES = {"loss_position": "true", "rest_position": "true", "distance_back_m": "true", "max_displacement_m": "true",
           "final_target_error_m": "true (the target crumb where the robot truly was when it laid it)",
           "blocks": "true", "return_speed_mps": "true"}
@@ -106,6 +106,7 @@ def compute(run: Run) -> dict:
     m["passed"], m["failures"] = True, []
     m.update(after_loss(run))
     m["frames"] = dict(FRAMES)
+    m["relapses"] = relapses(run.vehicle.event_log, run.trace.state)
     failures = verdict(run, m)
     m["passed"] = not failures
     m["failures"] = failures
@@ -142,6 +143,9 @@ def after_loss(run: Run) -> dict:
       operator drove it again (a claimed operator lease), or at the end of the run.
     - ``rest_link_quality``: the owner's packet delivery probability there.
     - ``link_cycles``: number of COMMS_LOST events.
+    - ``relapses``: COMMS_LOST events that came after a LINK_REGAINED with no operator driving in between: the
+      return stopped where the link came back and the robot, left there, lost it again (the failure the link map
+      exists to prevent). A loss after the operator drove on is the operator's, not a relapse.
     - ``regained_by`` (None if the vehicle never regained its owner's link after the loss): "return" when the
       contact that regained it began while a service block held the lease, or the link was good where the chain
       left the robot (delivery at rest >= GOOD_LINK_QUALITY: the vehicle's own link estimate may take a moment
@@ -184,6 +188,20 @@ def after_loss(run: Run) -> dict:
         "return_speed_mps": _r(sum(b.distance for b in run.blocks) / driving if driving > 0 else None),
         "blocks": blocks,
     }
+
+
+def relapses(events, states) -> int:
+    """Losses of the link that follow its regain with no operator teleop in between (see ``compute``)."""
+    n, regained = 0, None
+    for e in events:
+        if e.reason.name == "LINK_REGAINED":
+            regained = e.t
+        elif e.reason.name == "COMMS_LOST" and regained is not None:
+            k0, k1 = int(round(regained / DT)), min(len(states), int(round(e.t / DT)))
+            if not any(states[k] == State.TELEOP for k in range(k0, k1)):
+                n += 1
+            regained = None
+    return n
 
 
 def _holder_is_service(e) -> bool:

@@ -19,7 +19,7 @@ from sim.plots import plt, save
 WORST = 10
 TABLE_COLUMNS = ["scenario", "vehicle", "policy", "params", "n", "errors", "pass_rate", "link_regained_rate",
                  "time_to_link_p50_s", "time_to_link_p90_s", "rest_from_loss_m_mean", "collisions_during_return",
-                 "link_cycles_mean", "link_cycles_max"]
+                 "link_cycles_mean", "link_cycles_max", "relapses_mean"]
 
 
 def _cdf(ax, values: list[float], n: int, label: str) -> None:

@@ -45,6 +45,7 @@ METRICS = [("sim_duration_s", pa.float64()), ("link_lost_s", pa.float64()), ("re
            ("failures", pa.string()), ("loss_position", pa.string()), ("rest_position", pa.string()),
            ("rest_link_quality", pa.float64()), ("link_cycles", pa.int64()), ("regained_by", pa.string()),
            ("collisions_during_return", pa.int64()), ("return_speed_mps", pa.float64()), ("blocks", pa.string()),
+           ("relapses", pa.int64()),
            # vehicle ardurover only (docs/architecture.md §10): the firmware's version and its mode timeline
            ("firmware", pa.string()), ("firmware_modes", pa.string())]
 OUTCOME = [("status", pa.string()), ("error", pa.string()), ("cpu_s", pa.float64())]
@@ -135,7 +136,7 @@ class Store:
 SUMMARY_COLUMNS = ["scenario", "vehicle", "policy", "params", "n", "ok", "failed", "errors", "pass_rate",
                    "link_regained_rate", "time_to_link_p50_s", "time_to_link_p90_s", "time_to_link_p99_s",
                    "distance_back_m_mean", "rest_from_loss_m_mean", "rest_from_loss_m_p90",
-                   "collisions_during_return", "link_cycles_mean", "link_cycles_max"]
+                   "collisions_during_return", "link_cycles_mean", "link_cycles_max", "relapses_mean", "relapses_max"]
 
 
 def _json(v):
@@ -184,6 +185,7 @@ def summary(rows: Iterable[dict]) -> list[dict]:
         rest = [x for r in ran if (x := rest_from_loss(r)) is not None]
         coll = [r["collisions_during_return"] for r in ran if r.get("collisions_during_return") is not None]
         cycles = [r["link_cycles"] for r in ran if r.get("link_cycles") is not None]
+        relapsed = [r["relapses"] for r in ran if r.get("relapses") is not None]
         out.append({
             "scenario": scenario, "vehicle": vehicle, "policy": policy, "params": params, "n": len(rs),
             "ok": sum(r["status"] == "ok" for r in rs), "failed": sum(r["status"] == "failed" for r in rs),
@@ -196,6 +198,7 @@ def summary(rows: Iterable[dict]) -> list[dict]:
             "rest_from_loss_m_mean": _mean(rest), "rest_from_loss_m_p90": _pct(rest, 90),
             "collisions_during_return": sum(coll) if coll else None,
             "link_cycles_mean": _mean(cycles), "link_cycles_max": max(cycles) if cycles else None,
+            "relapses_mean": _mean(relapsed), "relapses_max": max(relapsed) if relapsed else None,
         })
     return out
 

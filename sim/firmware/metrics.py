@@ -131,6 +131,7 @@ def compute(run: FirmwareRun) -> dict:
         "regained_by": regained_by, "collisions_during_return": collided,
         "return_speed_mps": _r(distance / driving if driving > 0 else None), "blocks": blocks,
         "frames": {**FRAMES, "final_target_error_m": "true (the firmware's home: where the rover armed)"},
+        "relapses": None,  # returnlink's own notion (a regain, then a loss with no operator driving): no leases here
         "firmware": run.link.tap.version, "firmware_modes": run.firmware_modes,
     }
     m["failures"] = verdict(run, m)
