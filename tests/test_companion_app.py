@@ -360,3 +360,13 @@ def test_params_of_the_companion_are_its_own_parameters_addressed_to_191():
     rig.run(1)
     assert rig.companion.vehicle.params["LNK_TIMEOUT"] == 5.0
     assert not rig.ap.sent("PARAM_SET")
+
+
+def test_the_companion_offers_its_link_map_over_ftp_on_191_and_the_autopilot_never_sees_the_request():
+    rig = booted()
+    gs = rig.station()  # addressed to component 191
+    d = gs.fetch("linkmap.csv")
+    assert rig.run(5, lambda: d.done), "the download never finished"
+    assert d.ok, d.error
+    assert bytes(d.data).startswith(b"north,east,observations")
+    assert not rig.ap.sent("FILE_TRANSFER_PROTOCOL")
