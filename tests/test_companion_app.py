@@ -184,12 +184,19 @@ def silence_until_return(rig: Rig, owner) -> None:
     assert rig.run(6, lambda: rig.companion.vehicle.book.returning), "no return after the owner went silent"
 
 
-def test_a_return_switches_to_guided_and_streams_velocity_targets():
+def returning_from_20_m():
+    """An owned companion whose rover the pilot drove 20 m out by hand (in MANUAL), its owner then silent until
+    the return has switched the autopilot to GUIDED."""
     rig, owner = owned()
-    rig.ap.x = 20.0  # the pilot drove out by hand, in MANUAL
+    rig.ap.x = 20.0
     rig.run(1)
     silence_until_return(rig, owner)
     assert rig.run(2, lambda: rig.ap.mode == GUIDED)
+    return rig, owner
+
+
+def test_a_return_switches_to_guided_and_streams_velocity_targets():
+    rig, owner = returning_from_20_m()
     before = len(rig.ap.received)
     rig.run(1)
     targets = rig.ap.sent("SET_POSITION_TARGET_LOCAL_NED", before)
@@ -199,11 +206,7 @@ def test_a_return_switches_to_guided_and_streams_velocity_targets():
 
 
 def test_a_mode_change_it_did_not_command_ends_the_return_and_is_not_fought():
-    rig, owner = owned()
-    rig.ap.x = 20.0
-    rig.run(1)
-    silence_until_return(rig, owner)
-    assert rig.run(2, lambda: rig.ap.mode == GUIDED)
+    rig, owner = returning_from_20_m()
     rig.run(0.5)
     rig.ap.mode = MANUAL  # the pilot's RC switch
     rig.run(2)
@@ -219,11 +222,7 @@ def test_a_mode_change_it_did_not_command_ends_the_return_and_is_not_fought():
 
 
 def test_the_pilot_disarming_during_a_return_ends_it_and_a_disarmed_rover_is_never_switched():
-    rig, owner = owned()
-    rig.ap.x = 20.0
-    rig.run(1)
-    silence_until_return(rig, owner)
-    assert rig.run(2, lambda: rig.ap.mode == GUIDED)
+    rig, owner = returning_from_20_m()
     rig.ap.armed = False  # the pilot's disarm switch
     rig.run(2)
     assert not rig.companion.vehicle.book.returning
@@ -240,11 +239,7 @@ def test_the_pilot_disarming_during_a_return_ends_it_and_a_disarmed_rover_is_nev
 
 
 def test_link_regained_ends_the_return_in_hold():
-    rig, owner = owned()
-    rig.ap.x = 20.0
-    rig.run(1)
-    silence_until_return(rig, owner)
-    assert rig.run(2, lambda: rig.ap.mode == GUIDED)
+    rig, owner = returning_from_20_m()
     rig.deliver = lambda gs, t: True
     assert rig.run(4, lambda: not rig.companion.vehicle.book.returning)
     assert rig.companion.vehicle.event_log[-1].reason is ExpireReason.LINK_REGAINED
@@ -253,11 +248,7 @@ def test_link_regained_ends_the_return_in_hold():
 
 
 def test_the_owners_mode_change_takes_the_rover_back_from_a_return_without_a_hold():
-    rig, owner = owned()
-    rig.ap.x = 20.0
-    rig.run(1)
-    silence_until_return(rig, owner)
-    assert rig.run(2, lambda: rig.ap.mode == GUIDED)
+    rig, owner = returning_from_20_m()
     rig.deliver = lambda gs, t: True
     rig.send_as(owner, lambda m: m.command_long_encode(1, 1, apm.MAV_CMD_DO_SET_MODE, 0, 1, MANUAL, 0, 0, 0, 0, 0))
     rig.run(2)
