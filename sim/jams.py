@@ -1,5 +1,6 @@
-"""Jamming from a scenario's timed events (``jam``, ``unjam``): windows in which a station's radio hears nothing
-and is heard by nobody. One value both lockstep runs share, the native one and the firmware's."""
+"""The radio's timed events of a scenario, as both lockstep runs (the native one and the firmware's) apply them:
+jamming (``jam``, ``unjam``: windows in which a station's radio hears nothing and is heard by nobody) and a
+station's radio going down and up (``kill_gcs``, ``revive_gcs``)."""
 
 from __future__ import annotations
 
@@ -26,3 +27,20 @@ class Jams:
 
     def jammed(self, station: str, t: float) -> bool:
         return bool(self.windows) and any(a <= t < b and (not s or s == station) for a, b, s in self.windows)
+
+
+RADIO_EVENTS = frozenset(("jam", "unjam", "kill_gcs", "revive_gcs"))
+
+
+def radio_event(ev, station, jams: Jams, t: float) -> bool:
+    """Apply the radio event ``ev`` (due at ``t``) to ``jams`` or to ``station`` (anything with ``alive``; None:
+    the event names no station of the run). False: ``ev`` is not a radio event, for the caller to apply."""
+    if ev.action not in RADIO_EVENTS:
+        return False
+    if ev.action == "jam":
+        jams.jam(ev.t, ev.duration, ev.station)
+    elif ev.action == "unjam":
+        jams.unjam(t)
+    elif station is not None:
+        station.alive = ev.action == "revive_gcs"
+    return True

@@ -28,7 +28,7 @@ from link.proxy import RadioReport
 from link.radio import LinkState, Radio
 from link.transports import LockstepBus
 from sim.driver import simulated_vehicle
-from sim.jams import Jams
+from sim.jams import Jams, radio_event
 from sim.lease_record import LeaseRecord
 from sim.operator import Operator
 from sim.policies import DEFAULT_POLICY, check_policy, make_policy
@@ -300,18 +300,12 @@ class Run(LeaseRecord):
             ev = self.events.pop(0)
             name = ev.station or self.scenario.operator_station
             st = self.stations.get(name)
-            if ev.action == "jam":
-                self.jams.jam(ev.t, ev.duration, ev.station)
-            elif ev.action == "unjam":
-                self.jams.unjam(t)
-            elif ev.action == "kill_gcs" and st is not None:
-                st.alive = False
-            elif ev.action == "revive_gcs" and st is not None:
-                st.alive = True
-                # a station coming back resumes what it was doing: its stale lease and its old stream
-                st.gs.t = t
-                if st.gs.teleop is None:
-                    st.gs.drive_velocity(0.5, 0.0)
+            if radio_event(ev, st, self.jams, t):
+                if ev.action == "revive_gcs" and st is not None:
+                    # a station coming back resumes what it was doing: its stale lease and its old stream
+                    st.gs.t = t
+                    if st.gs.teleop is None:
+                        st.gs.drive_velocity(0.5, 0.0)
             elif ev.action == "takeover" and st is not None:
                 st.alive = True
                 st.gs.acquire(allow_takeover=False)

@@ -32,7 +32,7 @@ from link.radio import LinkState, Radio, subsystem_rng
 from link.transports import LockstepBus
 from sim.firmware.lockstep import DT, MODE_NAMES, SKID_PARAMS, SPEEDUP, Lockstep
 from sim.firmware.operator import FirmwareOperator
-from sim.jams import Jams
+from sim.jams import Jams, radio_event
 from sim.policies import COMPANION_POLICY, FAILSAFE_POLICIES
 from sim.robots import make_robot
 from sim.runner import TLOG_EPOCH_US
@@ -262,15 +262,9 @@ class FirmwareRun:
     def _event(self, ev, t: float) -> None:
         """One timed event of the scenario, due now."""
         st = self.stations.get(ev.station or self.scenario.operator_station)
-        if ev.action == "jam":
-            self.jams.jam(ev.t, ev.duration, ev.station)
-        elif ev.action == "unjam":
-            self.jams.unjam(t)
-        elif ev.action == "kill_gcs" and st is not None:
-            st.alive = False
-        elif ev.action == "revive_gcs" and st is not None:
-            st.alive = True
-        elif ev.action == "rtl" and st is not None and st.operator is not None:
+        if radio_event(ev, st, self.jams, t):
+            return
+        if ev.action == "rtl" and st is not None and st.operator is not None:
             st.operator.request_rtl(t)
         elif ev.action == "stop":
             self.stopped = True
