@@ -78,7 +78,7 @@ class FileClient:
 
     def _opened(self, d: Download, p: ftp.Packet) -> None:
         if p.opcode == ftp.OP_NAK:
-            self._fail(f"{ftp.ERRORS.get(p.error or 0, 'refused')}")
+            self._fail(ftp.ERRORS.get(p.error or 0, "refused"))
             return
         if len(p.data) < 4:
             self._fail("the open carried no size")
@@ -115,10 +115,10 @@ class FileClient:
     def _fail(self, why: str) -> None:
         d = self.download
         assert d is not None
-        d.done, d.error, self.request = True, why, None
-        if d.session is not None:
+        d.done, d.error = True, why
+        if d.session is not None:  # the vehicle still holds the file open: end the session (not waited for)
             self._send(ftp.OP_TERMINATE_SESSION, session=d.session)
-            self.request = None
+        self.request = None
 
     def _send(self, opcode: int, data: bytes = b"", offset: int = 0, session: int = 0) -> None:
         self.seq = (self.seq + 2) & 0xFFFF  # past the previous request and its answer
