@@ -42,7 +42,9 @@ def test_the_target_is_the_nearest_place_the_map_vouches_for_not_the_last_lucky_
     assert 4.0 <= gx < 8.0 and m.reliable(gx, 1.0) and not m.reliable(gx + 2.0, 1.0)
     # it drives no more path than the trail back to its target, plus the depth into the good place
     assert route.length <= (20.0 - gx) + 2.0 + 1e-6
-    assert route.onward is None  # one good stretch behind: arriving without the link, it stays there
+    # arriving there without the link, it goes on back along the trail: the place held the link once, the
+    # operator's range may have shrunk since (never parked in a dead zone)
+    assert route.onward is not None and route.onward.points[-1][0] < 0.5
     # without the map it is the last link-good crumb
     plain = plan_route(trail, (20.0, 1.0), Target.LINK, 50.0, link_lost=True)
     assert not plain.by_map and abs(plain.target[0] - 15.0) < 0.6

@@ -301,16 +301,17 @@ def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_dis
 def _next_stretch(linkmap: LinkMap, pts: np.ndarray, at: float, depth: float) -> float:
     """Metres along ``pts`` a return may go on to when it reached the place the map vouched for (``at``) and the
     link is still down: into the next separate stretch the map says held the link (past one where it was seen to
-    fail), or nowhere (``at``: it stays). Going on inside one good stretch does not help: the place held the
-    link, so what is missing now is not the place (the station went down, the link is jammed), and every metre
-    more is a metre further from where the operator left the robot."""
+    fail), or, with none, on back along the whole way (docs/architecture.md §6: a good place is a promise it may
+    not keep, the operator's range may have shrunk, and parking in a dead zone is the worst outcome; the
+    displacement circle and RTL_MAX_TIME still bound it)."""
+    total = polyline_length(pts)
     gap = linkmap.first_reliable(pts, skip=at, poor=True)
     if gap is None:
-        return at
+        return total
     again = linkmap.first_reliable(pts, skip=_along(pts, *gap))
     if again is None:
-        return at
-    return min(polyline_length(pts), _along(pts, *again) + depth)
+        return total
+    return min(total, _along(pts, *again) + depth)
 
 
 def continue_from(route: Route, at: tuple[float, float], search: float) -> Route:
