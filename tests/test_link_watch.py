@@ -265,3 +265,23 @@ def test_ratios_by_bisection_match_the_walk_over_every_arrival():
         assert d.ratios(t, short, long) == d._ratios_scan(t, short, long)
         bisected += times == sorted(times)
     assert bisected > 2000
+
+
+def test_regaining_while_contact_is_back_but_the_regain_not_yet_due():
+    """What a return arriving at its target asks before going on: a regain on its way is waited for there."""
+    w = LinkWatch(cfg())
+    for n in range(50):  # 10 Hz for 5 s
+        w = w.heard(n * 0.1, n)
+        w, _ = w.step(n * 0.1)
+    w, trig = w.step(8.0)  # silent past the timeout
+    assert trig is Trigger.LOST and not w.regaining(8.0)
+    w = w.heard(8.0, 80)
+    w, _ = w.step(8.0)
+    assert w.lost and w.regaining(8.1)  # heard again, LINK_REGAINED not yet due
+    assert not w.regaining(8.0 + 1.5 + 0.1)  # the contact broke off again: nothing on its way
+    for n in range(81, 95):
+        w = w.heard(n * 0.1, n)
+        w, trig = w.step(n * 0.1)
+        if trig is Trigger.REGAINED:
+            break
+    assert trig is Trigger.REGAINED and not w.regaining(w.last_heard)

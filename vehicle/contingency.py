@@ -101,7 +101,7 @@ class ReturnDriver:
                 step = start_block(cur.block, x, y, t, trail, v.params, link_lost, outbound_speed, linkmap, resume)
             else:
                 step = step_block(self.service, x, y, yaw, t, trail, v.params, link_lost, outbound_speed,
-                                  slipping=estimator.slipping, linkmap=linkmap)
+                                  slipping=estimator.slipping, linkmap=linkmap, regaining=book.link.regaining(t))
         except Exception as e:  # noqa: BLE001 - the return runs when nobody can restart the vehicle
             return self._fault(cur.index, e, t)
         if fresh:

@@ -259,6 +259,12 @@ class LinkWatch:
             return replace(self, lost=False), Trigger.REGAINED
         return self, Trigger.NONE
 
+    def regaining(self, t: float) -> bool:
+        """Lost, but the owner is heard well again without a break at ``t``: LINK_REGAINED is due once the contact
+        has lasted LNK_REGAIN_S."""
+        return (self.lost and self.contact_since is not None and self.last_heard is not None
+                and t - self.last_heard <= self.config.contact_gap + EPS)
+
     def with_config(self, config: WatchConfig) -> LinkWatch:
         t = self.last_heard
         low = self.low if t is None else _low(self.delivery, t, config, self.delivery.ratio(t, config.timeout))
