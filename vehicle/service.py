@@ -214,7 +214,7 @@ def step(st: ServiceState, x: float, y: float, yaw: float, t: float, trail: Trai
     """One control tick of the current block. ``slipping``: the estimator finds the odometry inconsistent (wheels
     spinning against a wall), so the estimated progress is not real and the block ends STUCK rather than
     "arriving" at a target it never reached. ``regaining``: the link is lost but the owner is heard well again
-    (LINK_REGAINED is on its way), so a block arriving at its target stops there instead of going on."""
+    (LINK_REGAINED is on its way), so a block arriving at its target waits there instead of going on."""
     it = st.items[st.item]
     max_time = params["RTL_MAX_TIME"]
     if max_time > 0 and t - st.started_at >= max_time:
@@ -233,8 +233,10 @@ def step(st: ServiceState, x: float, y: float, yaw: float, t: float, trail: Trai
     cfg = FollowerConfig.from_params(params)
     cmd = follow(st.path, x, y, yaw, st.progress, cruise(st), cfg, st.reverse)
     if cmd.arrived:
-        onward = _go_on(replace(st, progress=cmd.progress), x, y, t, params, link_lost and not regaining)
+        onward = _go_on(replace(st, progress=cmd.progress), x, y, t, params, link_lost)
         if onward is not None:
+            if regaining:  # the owner is heard again: wait here for LINK_REGAINED rather than drive on
+                return ServiceStep(replace(st, progress=cmd.progress), 0.0, 0.0)
             return ServiceStep(onward, 0.0, 0.0, replanned=True)
         return _next_item(replace(st, progress=cmd.progress), x, y, t, trail, params, link_lost, outbound_speed,
                           linkmap)
