@@ -32,6 +32,16 @@ def test_a_route_ahead_is_driven_forward():
     assert not cmd.reverse and cmd.speed == pytest.approx(1.0, abs=0.05)
 
 
+def test_the_end_of_a_route_the_way_goes_on_past_is_not_eased_into():
+    """A return arriving at its target with the link still down goes on back along the trail: the target is then a
+    waypoint, and slowing for it only to speed up again lost a second to every baseline."""
+    path = _line((0, 0), (2.0, 0))
+    stop = follow(path, 0.5, 0.0, NORTH, 0.0, 2.0)
+    through = follow(path, 0.5, 0.0, NORTH, 0.0, 2.0, through=True)
+    assert stop.speed < 1.3  # eases into a stop
+    assert through.speed == pytest.approx(2.0, abs=0.05)
+
+
 @pytest.mark.parametrize("reverse", [False, True])
 def test_a_large_heading_error_turns_in_place_before_driving(reverse):
     # the route runs east, the robot faces north: 90 degrees off, whichever end leads

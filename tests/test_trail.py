@@ -246,3 +246,23 @@ def test_ordinary_turns_and_link_transitions_are_not_folds(turn_deg):
     for k, (x, y, good) in enumerate(walk):
         trail.add(Crumb(x, y, k, link_good=good))
     assert all(trail.shortcut(i) == -1 for i in range(len(trail)))
+
+
+
+def test_a_stretch_keeps_the_fastest_speed_driven_on_it_through_simplification_and_compaction():
+    """The pace a return copies (RTL_SPEED=0) is the fastest the robot went on a stretch, not its length over its
+    time, and a stretch that compaction merges is as fast as the fastest part of it."""
+    trail = Trail(TrailConfig(spacing=0.5, tolerance=0.25, max_points=50))
+    speeds = {}
+    for k in range(200):  # a zig-zag wider than the tolerance: every crumb is kept until memory runs out
+        x, y = 0.5 * k, 0.3 * (k % 2)
+        speeds[x] = 1.8 if k % 7 == 3 else 0.9
+        trail.add(Crumb(x, y, 1.0 * k, 0.1, True, math.nan, speeds[x]))
+    assert trail.compactions > 0
+    xs, pace = trail.points()[:, 0], trail.paces()
+    merged = 0
+    for a, b, p in zip(xs[:-1], xs[1:], pace[1:], strict=True):
+        expect = max(v for x, v in speeds.items() if a < x <= b + 1e-9)
+        assert p == pytest.approx(expect), (a, b)
+        merged += b - a > 0.6
+    assert merged > 0  # compaction did merge stretches

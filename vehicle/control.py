@@ -26,6 +26,7 @@ if TYPE_CHECKING:
     from vehicle.app import Vehicle
 
 OUTBOUND_GAIN = 0.02  # per tick: how fast the remembered outbound speed follows the speed driven under teleop
+PACE_GAIN = 0.2  # per tick: the ground speed a crumb carries, smoothed over a few ticks (odometry noise, foot slip)
 OUTBOUND_MIN_STICK = 0.2  # m/s: slower setpoints (creeping, turning in place) do not teach the outbound speed
 
 
@@ -46,6 +47,7 @@ class ControlLoop:
         self.command_out = (0.0, 0.0)
         self.link_is_good = False  # this tick's link tag (owner heard recently, with good quality)
         self.outbound_speed = 0.0  # the speed driven outbound, for a return at RTL_SPEED 0
+        self.pace = 0.0  # the ground speed now, smoothed: the crumbs carry it, for a return's pace per stretch
         self.stale_commands_executed = 0  # setpoints the actuator guard caught outside the current lease: must be 0
         # the (book, setpoint) pair the teleop guards last passed (see ``_teleop``)
         self._cleared: tuple[LeaseBook | None, Setpoint | None] = (None, None)
@@ -70,7 +72,8 @@ class ControlLoop:
         good = self.link_is_good = v.link_good(t)
         if v.contingency is not None:
             v.contingency.observe(v, t)
-        self._crumbs.append(Crumb(p.x, p.y, t, p.std, good, math.nan))
+        self.pace += PACE_GAIN * (abs(r.speed) - self.pace)
+        self._crumbs.append(Crumb(p.x, p.y, t, p.std, good, math.nan, self.pace))
 
         # a regain halts a return only where the link map says the link holds (asked only while the link is lost)
         holds = not book.link.lost or self.returns.place_holds(p.x, p.y)

@@ -100,12 +100,13 @@ def _wrap(a: float) -> float:
 
 
 def follow(path: Path, x: float, y: float, yaw: float, progress: float, cruise: float,
-           cfg: FollowerConfig = FollowerConfig(), reverse: bool = False) -> FollowCommand:
+           cfg: FollowerConfig = FollowerConfig(), reverse: bool = False, through: bool = False) -> FollowCommand:
     """One control step of pure pursuit along ``path`` at up to ``cruise`` m/s.
 
     ``reverse`` is the direction of the previous step (False for a fresh route); the answer says which way to
     drive now. Backward, the robot pursues with its tail: the same geometry with the heading turned by pi, and a
-    negative speed."""
+    negative speed. ``through``: the end of ``path`` is not a stop (the way goes on past it), so the robot does
+    not ease into it."""
     lookahead = max(cfg.lookahead_min, cfg.lookahead_gain * cruise)
     progress = path.project(x, y, progress, window=2.0 * lookahead + 1.0)
     remaining = path.length - progress
@@ -127,7 +128,8 @@ def follow(path: Path, x: float, y: float, yaw: float, progress: float, cruise: 
         turn = min(cfg.max_yaw_rate, 2.0 * abs(alpha))
         return FollowCommand(0.0, math.copysign(turn, alpha), progress, remaining, False, reverse)
     speed = cruise * math.cos(alpha)
-    speed = min(speed, max(0.3, 0.8 * dist_end))  # ease into the end of the route
+    if not through:
+        speed = min(speed, max(0.3, 0.8 * dist_end))  # ease into the end of the route
     yaw_rate = 2.0 * speed * math.sin(alpha) / Ld  # the same sign backward: the tail leads
     yaw_rate = max(-cfg.max_yaw_rate, min(cfg.max_yaw_rate, yaw_rate))
     return FollowCommand(-speed if reverse else speed, yaw_rate, progress, remaining, False, reverse)

@@ -16,6 +16,7 @@ from vehicle.linkmap import LinkMap
 from vehicle.trail import Trail
 
 SPEED_RANGE = (0.3, 2.0)  # m/s: stretch speeds worth copying (a crawl is a pause; beyond the teleop limit, a glitch)
+PACE_WINDOW_M = 2.0  # m of path either side whose fastest stretch a return may drive at
 LINK_TAG_LAG_S = 1.0  # the link-quality estimate behind a crumb's tag averages over about this long
 
 
@@ -177,19 +178,28 @@ def _retrace(trail: Trail, start: tuple[float, float], goal: int,
 
 
 def outbound_speeds(trail: Trail, idx: np.ndarray) -> np.ndarray:
-    """Per route point, the speed the robot drove the trail stretch it is about to retrace (RTL_SPEED=0), from
-    the crumbs' times; a point with no stretch of its own takes the next one's (nan if none is known)."""
-    pts, t = trail.points(), trail.times()
+    """Per route point, the speed the robot drove the trail stretch it is about to retrace (RTL_SPEED=0): the
+    pace its crumbs were laid at, or, where the crumbs carry none, the stretch's length over its time; a point
+    with no stretch of its own takes the next one's (nan if none is known).
+
+    The pace is the fastest the robot went on the stretch, not its average: a stretch's time also holds the
+    turns on the spot at its ends and the stutter of teleop through a fading link, which are not a pace to drive
+    back at (a return that copied them fell behind every baseline), while a stretch the operator drove slowly
+    from end to end still has a slow pace."""
+    pts, t, pace = trail.points(), trail.times(), trail.paces()
     seg = np.full(len(pts), np.nan)
     if len(pts) >= 2:
         dt = np.diff(t)
         dist = np.hypot(*np.diff(pts, axis=0).T)
         with np.errstate(divide="ignore", invalid="ignore"):
             seg[1:] = np.where(dt > 1e-6, dist / np.where(dt > 1e-6, dt, 1.0), np.nan)
+        # a stretch's average slower than a crawl held a pause (or joins crumbs of different drives), one faster
+        # than the robot can go is an estimation glitch: neither is a pace to copy, the neighbours' is
+        seg[(seg < SPEED_RANGE[0]) | (seg > SPEED_RANGE[1])] = np.nan
+        # a measured pace is the odometry's, smoothed: at the robot's top speed its noise rises past the limit
+        seg[1:] = np.where(np.isfinite(pace[1:]), np.minimum(pace[1:], SPEED_RANGE[1]), seg[1:])
+        seg[seg < SPEED_RANGE[0]] = np.nan
     v = np.array([seg[i] if 1 <= i < len(seg) else np.nan for i in idx])
-    # a stretch slower than a crawl held a pause (or joins crumbs of different drives), one faster than the
-    # robot can go is an estimation glitch: neither is a pace to copy, the neighbours' is
-    v[(v < SPEED_RANGE[0]) | (v > SPEED_RANGE[1])] = np.nan
     for k in range(len(v) - 2, -1, -1):  # the start and the trail's first point take their neighbour's stretch
         if np.isnan(v[k]):
             v[k] = v[k + 1]
@@ -197,6 +207,18 @@ def outbound_speeds(trail: Trail, idx: np.ndarray) -> np.ndarray:
         if np.isnan(v[k]):
             v[k] = v[k - 1]
     return v
+
+
+def _neighbourhood_max(route: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Each point's speed raised to the fastest within PACE_WINDOW_M of path either side: a stretch of a few
+    crumbs where the robot was slowing down (the coast to a stop where the link went, the last metre of a
+    simplified stretch) takes the pace of the driving around it, which the robot kept there a moment before."""
+    if len(v) < 2:
+        return v
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(route, axis=0).T))])
+    lo = np.searchsorted(s, s - PACE_WINDOW_M, side="left")
+    hi = np.searchsorted(s, s + PACE_WINDOW_M, side="right")
+    return np.array([v[a:b].max() for a, b in zip(lo, hi, strict=True)])
 
 
 def truncate(route: np.ndarray, center: tuple[float, float], radius: float) -> tuple[np.ndarray, bool]:
@@ -267,7 +289,7 @@ def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_dis
         if goal > 0:
             more, more_idx = _retrace(trail, (float(pts[-1, 0]), float(pts[-1, 1])), 0, first=goal)
             pts, idx = np.vstack([pts, more[1:]]), np.concatenate([idx, more_idx[1:]])
-        way = Way(pts, outbound_speeds(trail, idx), at_goal)
+        way = Way(pts, _neighbourhood_max(pts, outbound_speeds(trail, idx)), at_goal)
     lost_link = target is Target.LINK and link_lost
     total = way.length
     onward_to = total  # how far along the way a block that arrives with the link still down may go on

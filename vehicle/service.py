@@ -186,14 +186,19 @@ def cruise(st: ServiceState) -> float:
     return min(RETURN_SPEED_MAX, max(RETURN_SPEED_MIN, v))
 
 
+def _may_go_on(st: ServiceState) -> bool:
+    """Whether this block, arriving at its target with the link down, would go on back along the trail."""
+    route = st.route
+    return (st.items[st.item].command == NAV_RETURN_TO_LINK and not st.onward and route is not None
+            and route.onward is not None and not route.truncated)
+
+
 def _go_on(st: ServiceState, x: float, y: float, t: float, params: Params, link_lost: bool) -> ServiceState | None:
     """A RETURN_TO_LINK block at its target with the link still down goes on back along the trail, within its
     displacement budget: a link-good tag is a promise the place may not keep (docs/architecture.md §6). None: it may
     not."""
-    it = st.items[st.item]
     route = st.route
-    if (it.command != NAV_RETURN_TO_LINK or not link_lost or st.onward or route is None or route.onward is None
-            or route.truncated):
+    if not link_lost or not _may_go_on(st):
         return None
     search = (st.path.length if st.path is not None else 0.0) + params["RTL_ARRIVE_R"]
     nxt = _bounded_from(continue_from(route.onward, (x, y), search), st.start, st.max_displacement)
@@ -231,13 +236,20 @@ def step(st: ServiceState, x: float, y: float, yaw: float, t: float, trail: Trai
         # past a dead-zone target only for want of the link: it is back (a block that continues on regain)
         return ServiceStep(st, 0.0, 0.0, ExpireReason.COMPLETED)
     cfg = FollowerConfig.from_params(params)
-    cmd = follow(st.path, x, y, yaw, st.progress, cruise(st), cfg, st.reverse)
+    # with the link down and a way on past the target, the target is a waypoint, not a stop: no easing into it
+    through = link_lost and not regaining and _may_go_on(st)
+    cmd = follow(st.path, x, y, yaw, st.progress, cruise(st), cfg, st.reverse, through)
     if cmd.arrived:
         onward = _go_on(replace(st, progress=cmd.progress), x, y, t, params, link_lost)
         if onward is not None:
             if regaining:  # the owner is heard again: wait here for LINK_REGAINED rather than drive on
                 return ServiceStep(replace(st, progress=cmd.progress), 0.0, 0.0)
-            return ServiceStep(onward, 0.0, 0.0, replanned=True)
+            # drive straight on along the way beyond, this same tick: no stop at a place that did not hold
+            go = follow(onward.path, x, y, yaw, 0.0, cruise(onward), cfg, st.reverse, _may_go_on(onward))
+            if go.arrived:
+                return ServiceStep(onward, 0.0, 0.0, replanned=True)
+            return ServiceStep(replace(onward, progress=go.progress, reverse=go.reverse), go.speed, go.yaw_rate,
+                               replanned=True)
         return _next_item(replace(st, progress=cmd.progress), x, y, t, trail, params, link_lost, outbound_speed,
                           linkmap)
     if cmd.remaining < st.best_remaining - 0.2:

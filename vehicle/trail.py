@@ -61,6 +61,7 @@ class Crumb(NamedTuple):
     std: float = 0.0
     link_good: bool = True
     rssi: float = math.nan
+    speed: float = math.nan  # the ground speed driven when it was laid (m/s), smoothed over a few ticks
 
 
 def _seg_dist(px: float, py: float, ax: float, ay: float, bx: float, by: float) -> float:
@@ -72,6 +73,13 @@ def _seg_dist(px: float, py: float, ax: float, ay: float, bx: float, by: float) 
     return math.hypot(px - ax - u * dx, py - ay - u * dy)
 
 
+def _fmax(a: float, b: float) -> float:
+    """max ignoring nan (an unknown speed): the cheap scalar form of ``np.fmax`` for the per-tick path."""
+    if a != a:
+        return b
+    return a if b != b or a >= b else b
+
+
 def _wrap(a: float) -> float:
     return (a + math.pi) % (2 * math.pi) - math.pi
 
@@ -80,7 +88,7 @@ class Trail:
     """Kept crumbs in preallocated arrays, oldest first. Mutable: it is the one stateful part of the planner's
     input, updated once per estimator output; everything that reads it (targets, routes) is a pure function."""
 
-    FIELDS = ("x", "y", "t", "std", "rssi", "tol")
+    FIELDS = ("x", "y", "t", "std", "rssi", "tol", "pace")
 
     def __init__(self, config: TrailConfig | None = None) -> None:
         self.config = config or TrailConfig()
@@ -95,6 +103,7 @@ class Trail:
         self._grid: dict[tuple[int, int], list[int]] = {}
         self._run_loop = -1  # loop found by the previous crumb (-1: none): a new run of overlap starts a point
         self._reset_pending()
+        self._pace = math.nan  # fastest crumb speed since the last kept point: the pace of the stretch into the next
         self._last: Crumb | None = None  # last crumb seen (recorded or not)
         self._rec: Crumb | None = None  # last crumb recorded (spacing reference)
 
@@ -126,6 +135,14 @@ class Trail:
             t = np.append(t, self._pend.t)
         return t
 
+    def paces(self) -> np.ndarray:
+        """Per point: the fastest speed driven on the stretch from the point before to it (nan: not known), the
+        pace a return copies there; the time between crumbs also holds the stops and turns on the spot."""
+        pace = self._f[: self.count, 6].copy()
+        if self._pend is not None:
+            pace = np.append(pace, self._pace)
+        return pace
+
     def anchors(self) -> np.ndarray:
         return self._anchor[: self.count].copy()
 
@@ -148,6 +165,7 @@ class Trail:
         transition = last is not None and last.link_good != crumb.link_good
         rec = self._rec
         if not transition and rec is not None and math.hypot(crumb.x - rec.x, crumb.y - rec.y) < self.config.spacing:
+            self._pace = _fmax(self._pace, crumb.speed)  # on the open stretch (or, by one crumb, the next one)
             return
         self._rec = crumb
         if self.count == 0 and self._pend is None:
@@ -202,6 +220,7 @@ class Trail:
             self._lo = max(self._lo, ang - half)
             self._hi = min(self._hi, ang + half)
         self._maxd = max(self._maxd, d)
+        self._pace = _fmax(self._pace, c.speed)
         self._pend = c
         self._pend_shortcut = loop  # the open end's own shortcut: the newest crumb's is the one a return uses
 
@@ -221,7 +240,9 @@ class Trail:
         if self.count >= self.config.max_points:
             shortcut = self._compact(shortcut)
         i = self.count
-        self._f[i] = (c.x, c.y, c.t, c.std, c.rssi, self.config.tolerance)
+        pace = self._pace if c is self._pend else _fmax(self._pace, c.speed)  # the open end's is already in
+        self._f[i] = (c.x, c.y, c.t, c.std, c.rssi, self.config.tolerance, pace)
+        self._pace = math.nan
         self._good[i] = c.link_good
         self._anchor[i] = anchor
         self._shortcut[i] = shortcut
@@ -322,6 +343,9 @@ class Trail:
             idx = np.flatnonzero(keep[:half])
             keep[idx[1::2]] = False
         self._f[:half, 5] = np.where(keep[:half], np.maximum(self._f[:half, 5], tol), self._f[:half, 5])
+        # a kept point's stretch now runs from the kept point before it: its pace is the fastest of those merged
+        kept_idx = np.flatnonzero(keep)
+        self._f[kept_idx, 6] = np.fmax.reduceat(self._f[:n, 6], np.concatenate([[0], kept_idx[:-1] + 1]))
         old_to_new = np.cumsum(keep) - 1
         for arr in (self._f, self._good, self._anchor, self._shortcut):
             kept = arr[:n][keep].copy()
