@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from link.storage import StoredFileError
 from sim.campaign.store import read_rows, rest_from_loss, time_to_link
 
 REST_RATIO = 0.25  # returnlink's mean rest distance at most this share of SmartRTL's
@@ -85,14 +86,18 @@ def main(argv: list[str]) -> int:
     if not argv:
         print(__doc__, file=sys.stderr)
         return 2
-    rows = read_rows(Path(argv[0]) / "trials.parquet")
+    try:
+        rows = read_rows(Path(argv[0]) / "trials.parquet")
+        weak = read_rows(Path(argv[1]) / "trials.parquet") if len(argv) > 1 else None
+    except StoredFileError as e:
+        print(f"linkmap_evidence: {e}", file=sys.stderr)
+        return 2
     errors = sum(1 for r in rows if r.get("status") == "error")
     table, misses = main_table(rows)
     print(f"## {argv[0]}: {len(rows)} trials, {errors} errors\n\n{table}\n")
     pooled, _ = main_table(rows, pooled=True)
     print(f"### both robots pooled\n\n{pooled}\n")
-    if len(argv) > 1:
-        weak = read_rows(Path(argv[1]) / "trials.parquet")
+    if weak is not None:
         wt, wm = weak_table(weak)
         print(f"## {argv[1]}: {len(weak)} trials\n\n{wt}\n")
         misses += wm

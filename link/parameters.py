@@ -48,6 +48,8 @@ SPECS: tuple[ParamSpec, ...] = (
               integer=True),
     ParamSpec("LNK_MAP_MARGIN", 0.3, 0.0, 0.9, "",
               "a reliable cell's delivery lower bound exceeds LNK_MIN_Q by this"),
+    ParamSpec("LNK_MAP_SEEK", 0.0, 0.0, 1000.0, "m",
+              "at the map's place with the link still down, go on back along the trail this far (0 = stay)"),
 )
 BY_NAME = {s.name: s for s in SPECS}
 

@@ -36,6 +36,26 @@ class Leg:
     def done(self) -> bool:
         return self.index >= len(self.points)
 
+    def join(self, x: float, y: float) -> None:
+        """Pick the route up where a person would, from (x, y): at the start of the leg the robot is alongside
+        (its projection falls inside the leg and it is nearer that leg than the next waypoint), never behind the
+        waypoint already reached. An operator whose robot the return brought home past the first waypoint of the
+        way out drives on home, not back into the dead zone to touch that waypoint first."""
+        if self.done:
+            return
+        wx, wy = self.points[self.index][:2]
+        best, best_d = self.index, math.hypot(x - wx, y - wy)
+        for k in range(max(self.index, 1), len(self.points)):
+            (ax, ay), (bx, by) = self.points[k - 1][:2], self.points[k][:2]
+            dx, dy = bx - ax, by - ay
+            L2 = dx * dx + dy * dy
+            u = ((x - ax) * dx + (y - ay) * dy) / L2 if L2 > 0 else -1.0
+            if 0.0 < u < 1.0:
+                d = math.hypot(x - ax - u * dx, y - ay - u * dy)
+                if d < best_d:
+                    best, best_d = k, d
+        self.index = best
+
 
 class Operator:
     def __init__(self, gs: GroundStation, route, resume_route, plan: list[Item], teleop: str = "velocity",
@@ -79,6 +99,8 @@ class Operator:
                 self._say(t, f"claiming [{st.epoch},{st.current}]")
                 if self.phase == "driving" and not self.leg.done:
                     self.phase = "resuming"
+                if self.phase == "resuming" and v.position is not None:
+                    self.resume.join(*v.position)  # the return moved the robot: pick the way home up from there
             return
         if not fresh:
             self.cut_off = self.heading_to or self.cut_off  # the latest sign of a loss names the place

@@ -4,6 +4,7 @@ passed in, on the pure planner, the service's way back and the lease book."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from vehicle.lease import ExpireReason, Holder, LeaseBook, LeaseConfig, ServiceBlock
 from vehicle.linkmap import LinkMap, MapConfig
@@ -42,9 +43,12 @@ def test_the_target_is_the_nearest_place_the_map_vouches_for_not_the_last_lucky_
     assert 4.0 <= gx < 8.0 and m.reliable(gx, 1.0) and not m.reliable(gx + 2.0, 1.0)
     # it drives no more path than the trail back to its target, plus the depth into the good place
     assert route.length <= (20.0 - gx) + 2.0 + 1e-6
-    # arriving there without the link, it goes on back along the trail: the place held the link once, the
-    # operator's range may have shrunk since (never parked in a dead zone)
-    assert route.onward is not None and route.onward.points[-1][0] < 0.5
+    # arriving there without the link, it stays: the place held the link, what is missing is not the place
+    assert route.onward is None
+    # unless the owner expects the station's range to shrink: LNK_MAP_SEEK metres on back along the trail
+    seeking = plan_route(trail, (20.0, 1.0), Target.LINK, 50.0, link_lost=True, linkmap=m, map_depth=2.0,
+                         map_seek=3.0)
+    assert seeking.onward is not None and seeking.onward.points[-1][0] == pytest.approx(gx - 3.0, abs=0.05)
     # without the map it is the last link-good crumb
     plain = plan_route(trail, (20.0, 1.0), Target.LINK, 50.0, link_lost=True)
     assert not plain.by_map and abs(plain.target[0] - 15.0) < 0.6
@@ -59,6 +63,17 @@ def test_a_return_goes_on_only_to_a_separate_stretch_where_the_link_held():
     assert route.onward is not None
     end = route.onward.points[-1]
     assert 2.0 <= end[0] < 6.0 and m.reliable(end[0], 1.0)
+
+
+def test_a_return_stops_inside_a_short_good_place_not_in_the_dead_stretch_beyond_it():
+    """The depth into a place the map vouches for stops at the middle of its reliable run: a return that drove the
+    whole depth crossed a 2 m good place into a null (a weak radio at a tunnel's portal) and parked there."""
+    # good 0-4 m, failed 4-10 m, good 10-12 m only, dead beyond
+    trail, m = outbound(12.0, lambda x: x < 4.0 or 10.0 <= x < 12.0)
+    route = plan_route(trail, (20.0, 1.0), Target.LINK, 50.0, link_lost=True, linkmap=m, map_depth=3.0)
+    assert route.by_map and 10.0 <= route.target[0] < 12.0
+    end = route.points[-1]
+    assert m.reliable(end[0], end[1]), f"the route ends at {end[0]:.2f} m, outside the place that held"
 
 
 def test_an_operator_commanded_return_still_goes_to_the_trails_start():

@@ -154,7 +154,7 @@ def _next_item(st: ServiceState, x: float, y: float, t: float, trail: Trail, par
         depth = params["RTL_ARRIVE_R"] + 0.5 * params["LNK_MAP_CELL"]
         route = plan_route(trail, (x, y), target, remaining, link_lost, heading=math.radians(it.x),
                            overshoot=overshoot, linkmap=linkmap, resume=resume if link_lost else None,
-                           map_depth=depth)
+                           map_depth=depth, map_seek=params["LNK_MAP_SEEK"])
         if target is not Target.HEADING:
             route = _bounded_from(route, st.start, max_disp)
     elif it.command == NAV_RETURN_TO_LAUNCH:
