@@ -37,9 +37,10 @@ class Leg:
         return self.index >= len(self.points)
 
     def join(self, x: float, y: float) -> None:
-        """Pick the route up where a person would, from (x, y): at the start of the leg the robot is alongside
-        (its projection falls inside the leg and it is nearer that leg than the next waypoint), never behind the
-        waypoint already reached. An operator whose robot the return brought home past the first waypoint of the
+        """Pick the route up where a person would, from (x, y): at the start of the leg the robot is on (its
+        projection falls inside the leg, within WAYPOINT_RADIUS of it, nearer it than the next waypoint), never
+        behind the waypoint already reached; off every leg (in a room beside a doorway) it drives to the next
+        waypoint, as the route was written. An operator whose robot the return brought home past the first waypoint of the
         way out drives on home, not back into the dead zone to touch that waypoint first."""
         if self.done:
             return
@@ -52,14 +53,14 @@ class Leg:
             u = ((x - ax) * dx + (y - ay) * dy) / L2 if L2 > 0 else -1.0
             if 0.0 < u < 1.0:
                 d = math.hypot(x - ax - u * dx, y - ay - u * dy)
-                if d < best_d:
+                if d < best_d and d < WAYPOINT_RADIUS:
                     best, best_d = k, d
         self.index = best
 
 
 class Operator:
     def __init__(self, gs: GroundStation, route, resume_route, plan: list[Item], teleop: str = "velocity",
-                 attempts: int = 2) -> None:
+                 attempts: int = 2, rejoin: bool = True) -> None:
         self.gs = gs
         self.plan = plan
         self.teleop = teleop
@@ -70,6 +71,7 @@ class Operator:
         self.transfer: Transfer | None = None
         self.claims = 0
         self.attempts = attempts
+        self.rejoin = rejoin  # False: a stubborn operator that drives every waypoint of its way home
         self.heading_to: tuple[float, float] | None = None  # the waypoint being driven toward
         # the one being driven toward at the latest sign of a loss (the picture froze, or the vehicle said it lost
         # us); it counts once the vehicle is back and waits for a claim
@@ -99,7 +101,7 @@ class Operator:
                 self._say(t, f"claiming [{st.epoch},{st.current}]")
                 if self.phase == "driving" and not self.leg.done:
                     self.phase = "resuming"
-                if self.phase == "resuming" and v.position is not None:
+                if self.rejoin and self.phase == "resuming" and v.position is not None:
                     self.resume.join(*v.position)  # the return moved the robot: pick the way home up from there
             return
         if not fresh:

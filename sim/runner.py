@@ -138,7 +138,7 @@ class Run(LeaseRecord):
             st.inbox = self.bus.inbox(st.name)
         self._operator = op = self.stations[sc.operator_station]
         op.operator = Operator(op.gs, sc.route, sc.resume_route, from_plan_items(sc.plan), sc.teleop,
-                                   attempts=sc.attempts)
+                                   attempts=sc.attempts, rejoin=sc.rejoin)
         self.events = sorted(sc.events, key=lambda e: e.t)
         self.jams = Jams()
         self.t = 0.0

@@ -101,6 +101,7 @@ class Scenario:
     resume_route: tuple[tuple[float, float, float], ...]
     plan: tuple[PlanItem, ...]
     attempts: int = 2  # operator.attempts: how often the operator drives toward a place where the link died
+    rejoin: bool = True  # operator.rejoin: after a return, pick the resume route up at the leg the robot is on
     params: dict[str, float] = field(default_factory=dict)
     events: tuple[Event, ...] = ()
     criteria: Criteria = Criteria()
@@ -323,10 +324,10 @@ def _start(r: _Reader, raw: dict) -> tuple[float, float, float]:
 
 
 def _operator(r: _Reader, raw: dict, stations: tuple[Station, ...]) -> dict:
-    """[operator]: the scripted operator's station, teleop kind, route, attempts, return plan and parameters (the
-    Scenario fields they fill, by name)."""
+    """[operator]: the scripted operator's station, teleop kind, route, attempts, rejoin, return plan and
+    parameters (the Scenario fields they fill, by name)."""
     op = r.table(raw, "operator", "operator", ("station", "teleop", "route", "resume_route", "plan", "params",
-                                                  "attempts"))
+                                                  "attempts", "rejoin"))
     op_station = r.get(op, "station", "operator.station", str, stations[0].name)
     if op_station not in {s.name for s in stations}:
         raise r.fail("operator.station", f"no station named {op_station!r}")
@@ -337,6 +338,7 @@ def _operator(r: _Reader, raw: dict, stations: tuple[Station, ...]) -> dict:
     attempts = r.get(op, "attempts", "operator.attempts", int, 2)
     if not 1 <= attempts <= 1000:
         raise r.fail("operator.attempts", f"must be in [1, 1000], got {attempts}")
+    rejoin = r.get(op, "rejoin", "operator.rejoin", bool, True)
     resume = r.points(op, "resume_route", "operator.resume_route", n=3, min_len=1) if "resume_route" in op else ()
     for p in (*route, *resume):
         if not 0 < p[2] <= 5:
@@ -345,7 +347,7 @@ def _operator(r: _Reader, raw: dict, stations: tuple[Station, ...]) -> dict:
     params = {k: _param(r, k, r.number(params_raw, k, f"operator.params.{k}"), f"operator.params.{k}")
               for k in params_raw}
     return {"operator_station": op_station, "teleop": teleop, "route": route, "resume_route": resume,
-            "attempts": attempts, "plan": _plan(r, op), "params": params}
+            "attempts": attempts, "rejoin": rejoin, "plan": _plan(r, op), "params": params}
 
 
 def _plan(r: _Reader, op: dict) -> tuple[PlanItem, ...]:

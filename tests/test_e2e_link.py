@@ -70,7 +70,8 @@ def test_weak_radio_cycles_are_the_operators_not_the_vehicles(tmp_path):
     """The tunnel at -20 dBm: the link dies 25 m in. Each return ends where the link is back (LINK_REGAINED, never
     parked at a dead target), and a new loss only follows the operator driving back in: no cycle of the
     vehicle's own making, however often a stubborn operator retries its route."""
-    stubborn = {"power_dbm = 20.0": "power_dbm = -20.0", 'teleop = "velocity"': 'teleop = "velocity"\nattempts = 1000'}
+    stubborn = {"power_dbm = 20.0": "power_dbm = -20.0",
+                'teleop = "velocity"': 'teleop = "velocity"\nattempts = 1000\nrejoin = false'}
     path = variant(tmp_path, "tunnel", "tunnel-stubborn", stubborn)
     r, m = mission(str(path))
     got = events(m)
@@ -95,6 +96,18 @@ def test_weak_radio_cycles_are_the_operators_not_the_vehicles(tmp_path):
         assert b.distance <= 10.0, (b.index, b.distance)
     assert math.isfinite(m["distance_back_m"])
     assert m["link_cycles"] > 2  # the stubborn operator keeps trying: what the next test's operator learns from
+
+
+def test_at_a_weak_radio_an_operator_who_drives_home_from_where_the_return_left_it_loses_the_link_once(tmp_path):
+    """The tunnel at -20 dBm with the scenario's own operator: the return brings the robot back to where the link
+    is, and the operator drives home from there; one loss, one regain by the return, no relapse. (It used to drive
+    to the resume route's first waypoint first, back into the dead tunnel: every policy then lost the link twice.)"""
+    path = variant(tmp_path, "tunnel", "tunnel-weak", {"power_dbm = 20.0": "power_dbm = -20.0"})
+    r, m = mission(str(path))
+    assert m["link_cycles"] == 1 and m["relapses"] == 0, events(m)
+    assert m["regained_by"] == "return"
+    end = np.array(r.trace.true[-1])
+    assert end[0] < 5.0, f"the operator never drove home: it ended at {end.round(1)}"
 
 
 @pytest.mark.parametrize("vehicle", ["rover", "legged"])

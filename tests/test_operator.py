@@ -27,3 +27,11 @@ def test_joining_never_goes_back_to_a_waypoint_already_passed():
     leg = Leg(((0.0, 0.0, 1.0), (10.0, 0.0, 1.0), (10.0, 10.0, 1.0)), index=2)
     leg.join(5.0, 0.0)  # alongside the first leg, already driven
     assert leg.index == 2
+
+
+def test_a_robot_beside_a_leg_but_not_on_it_drives_to_the_next_waypoint_as_written():
+    """building: resting in the room 1.9 m off the leg through the doorway, cutting over to that leg's end clipped
+    the door frame; the waypoint before the doorway is there to be driven to."""
+    leg = Leg(((35.0, 3.0, 0.5), (34.5, -0.8, 0.5), (-5.0, 0.0, 1.5)))
+    leg.join(36.85, 2.6)
+    assert leg.index == 0

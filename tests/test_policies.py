@@ -72,8 +72,9 @@ def test_a_trial_and_its_baseline_are_identical_until_the_link_is_lost(other):
     assert a.trace.heard[:k + 1] == b.trace.heard[:k + 1]
     assert ma["loss_position"] == mb["loss_position"] and ma["loss_position"] is not None
     assert ma["link_lost_s"] == mb["link_lost_s"]
-    # and from there only the policy differs
-    assert math.dist(a.trace.true[-1], b.trace.true[-1]) > 1.0
+    # and from there only the policy differs (both operators drive home in the end, so not by where they end)
+    n = min(len(a.trace.true), len(b.trace.true))
+    assert max(math.dist(a.trace.true[i], b.trace.true[i]) for i in range(k, n)) > 1.0
 
 
 def test_a_packets_fate_does_not_depend_on_traffic_before_it_or_the_other_direction():

@@ -107,6 +107,7 @@ FULL = GOOD.replace('attenuation_db = "loud"', "attenuation_db = 3").replace(
     (("time = 5", "time = -1"), "operator.plan[1].time", "within"),
     (("[operator]", "[operator]\nattempts = 0"), "operator.attempts", "[1, 1000]"),
     (("[operator]", "[operator]\nattempts = 2.5"), "operator.attempts", "must be int"),
+    (("[operator]", "[operator]\nrejoin = 1"), "operator.rejoin", "must be bool"),
     (("[operator]", "[[events]]\nt = 3\naction = \"param\"\nname = \"NOPE\"\n[operator]"), "events[0].name",
      "no vehicle parameter"),
     (("[operator]", "[criteria]\nchain_reasons = [\"DONE\"]\n[operator]"), "criteria.chain_reasons",
