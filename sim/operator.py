@@ -40,8 +40,8 @@ class Leg:
         """Pick the route up where a person would, from (x, y): at the start of the leg the robot is on (its
         projection falls inside the leg, within WAYPOINT_RADIUS of it, nearer it than the next waypoint), never
         behind the waypoint already reached; off every leg (in a room beside a doorway) it drives to the next
-        waypoint, as the route was written. An operator whose robot the return brought home past the first waypoint of the
-        way out drives on home, not back into the dead zone to touch that waypoint first."""
+        waypoint, as the route was written. An operator whose robot the return brought home past the first
+        waypoint of the way out drives on home, not back into the dead zone to touch that waypoint first."""
         if self.done:
             return
         wx, wy = self.points[self.index][:2]
