@@ -129,6 +129,21 @@ def test_marginal_delivery_with_min_q_zero_keeps_the_lease():
     assert reasons(pair, t0) == []
 
 
+def commanded_return_pace(pair: Pair) -> np.ndarray:
+    """Stop, command RTL, and the speed back along -x over every second of the return (m/s)."""
+    pair.gs.stop()
+    pair.step(1.0)
+    p = pair.gs.rtl()
+    pair.step(0.2)
+    v = pair.vehicle
+    assert p.ok and v.state() == State.RETURNING
+    xs = []
+    while v.state() == State.RETURNING and len(xs) < int(30 / DT):
+        pair.step()
+        xs.append(pair.driver.pose[0])
+    return np.convolve(-np.diff(xs) / DT, np.ones(50) / 50, mode="valid")
+
+
 def test_return_speed_is_the_speed_driven_outbound_on_that_stretch():
     """Rule 5: RTL_SPEED=0 means the speed of the stretch being retraced, not the last second of teleop."""
     pair = acquired(Pair())
@@ -136,17 +151,7 @@ def test_return_speed_is_the_speed_driven_outbound_on_that_stretch():
     v.set_param("RTL_MAX_DISP", 12.0)
     drive(pair, 1.2, 15.0)
     drive(pair, 0.3, 2.0)  # the last second of teleop was slow
-    pair.gs.stop()
-    pair.step(1.0)
-    p = pair.gs.rtl()
-    pair.step(0.2)
-    assert p.ok and v.state() == State.RETURNING
-    xs = []
-    while v.state() == State.RETURNING and len(xs) < int(30 / DT):
-        pair.step()
-        xs.append(pair.driver.pose[0])
-    speeds = -np.diff(xs) / DT
-    per_second = np.convolve(speeds, np.ones(50) / 50, mode="valid")
+    per_second = commanded_return_pace(pair)
     assert per_second.max() >= 1.0, f"came back at {per_second.max():.2f} m/s on a stretch driven at 1.2"
     assert per_second.max() <= 2.0 + 0.05  # within the robot's limits
 
@@ -160,16 +165,7 @@ def test_a_stretch_driven_in_stutters_is_retraced_at_the_pace_driven_not_at_its_
     for _ in range(8):
         drive(pair, 1.2, 1.5)
         drive(pair, 0.0, 1.5)
-    pair.gs.stop()
-    pair.step(1.0)
-    p = pair.gs.rtl()
-    pair.step(0.2)
-    assert p.ok and v.state() == State.RETURNING
-    xs = []
-    while v.state() == State.RETURNING and len(xs) < int(30 / DT):
-        pair.step()
-        xs.append(pair.driver.pose[0])
-    per_second = np.convolve(-np.diff(xs) / DT, np.ones(50) / 50, mode="valid")
+    per_second = commanded_return_pace(pair)
     assert per_second.max() >= 1.0, f"came back at {per_second.max():.2f} m/s on a stretch driven at 1.2"
     assert per_second.max() <= 1.2 * 1.1  # not faster than it was driven
 
