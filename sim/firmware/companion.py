@@ -73,7 +73,7 @@ class CompanionRun(LeaseRecord, FirmwareRun):
 
     def _make_operator(self, sc: Scenario) -> CompanionOperator:
         return CompanionOperator(sc.route, sc.resume_route, self.origin, from_plan_items(sc.plan), sc.attempts,
-                                 sysid=sc.station(sc.operator_station).sysid, rejoin=sc.rejoin)
+                                 sysid=sc.station(sc.operator_station).sysid)
 
     @property
     def vehicle(self):

@@ -39,7 +39,7 @@ LOCAL_POSITION_INTERVAL_US = 200_000
 
 class FirmwareOperator:
     def __init__(self, route, resume_route, origin: tuple[float, float], attempts: int = 2,
-                 sysid: int = GCS_SYSID, compid: int = GCS_COMPID, target_system: int = 1, rejoin: bool = True) -> None:
+                 sysid: int = GCS_SYSID, compid: int = GCS_COMPID, target_system: int = 1) -> None:
         self.mav = apm.MAVLink(None, srcSystem=sysid, srcComponent=compid)
         self.mav.robust_parsing = True
         self.target = target_system
@@ -47,7 +47,6 @@ class FirmwareOperator:
         self.leg = Leg(tuple(route))
         self.resume = Leg(tuple(resume_route))
         self.attempts = attempts
-        self.rejoin = rejoin  # after a return, pick the resume route up at the leg the rover is on (sim.operator)
         self.phase = "connect"
         self.out: list[bytes] = []
         self.next_heartbeat = 0.0
@@ -166,8 +165,6 @@ class FirmwareOperator:
                     self.log.append((t, "taking control back"))
                     if phase == "driving":
                         self.phase = "resuming"
-                    if self.rejoin and self.phase == "resuming" and self.position is not None:
-                        self.resume.join(*self.position)
             return
         self.rest_since = None
         if self.mode != GUIDED:

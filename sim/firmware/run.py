@@ -137,7 +137,7 @@ class FirmwareRun:
     def _make_operator(self, sc: Scenario) -> FirmwareOperator:
         """The scripted operator: a person flying the firmware in GUIDED from the scenario's station."""
         return FirmwareOperator(sc.route, sc.resume_route, self.origin, sc.attempts,
-                                sysid=sc.station(sc.operator_station).sysid, rejoin=sc.rejoin)
+                                sysid=sc.station(sc.operator_station).sysid)
 
     # ----- the loop ------------------------------------------------------------------------------------------
     def run(self) -> FirmwareRun:
