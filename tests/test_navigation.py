@@ -42,6 +42,19 @@ def test_the_end_of_a_route_the_way_goes_on_past_is_not_eased_into():
     assert through.speed == pytest.approx(2.0, abs=0.05)
 
 
+def test_a_gentle_arc_is_driven_at_speed_and_a_tight_one_at_the_speed_the_robot_can_turn_it():
+    """No cos(heading error) slow-down on arcs the robot can turn at its cruise speed (it cost a walking robot a
+    quarter second at every doorway, and its P95 time to link against SmartRTL in the building); an arc tighter
+    than max_yaw_rate allows at speed is driven at the speed whose turn rate it is, so the robot stays on it."""
+    cfg = FollowerConfig()
+    gentle = follow(_line((0, 0.3), (20, 0.3)), 0.0, 0.0, NORTH, 0.0, 0.6, cfg)  # walking, 0.3 m off the line
+    assert gentle.speed == pytest.approx(0.6)  # cos(heading error) would have asked 0.56
+    slow_turner = FollowerConfig(max_yaw_rate=1.0)
+    tight = follow(_line((0, 0.6), (20, 0.6)), 0.0, 0.0, NORTH, 0.0, 2.0, slow_turner)  # 2 m/s, 0.6 m off the line
+    assert 1.0 < tight.speed < 1.9
+    assert abs(tight.yaw_rate) == pytest.approx(1.0, rel=1e-6)  # as fast as that arc can be turned
+
+
 @pytest.mark.parametrize("reverse", [False, True])
 def test_a_large_heading_error_turns_in_place_before_driving(reverse):
     # the route runs east, the robot faces north: 90 degrees off, whichever end leads
