@@ -239,21 +239,6 @@ def truncate(route: np.ndarray, center: tuple[float, float], radius: float) -> t
     return np.array(out), False
 
 
-def _head(pts: np.ndarray, dist: float) -> list[np.ndarray]:
-    """The points of polyline ``pts`` after its first, up to ``dist`` metres along it (the last one cut there)."""
-    out: list[np.ndarray] = []
-    left = dist
-    for a, b in zip(pts[:-1], pts[1:], strict=True):
-        seg = float(np.hypot(*(b - a)))
-        if seg >= left:
-            if seg > 1e-9:
-                out.append(a + (b - a) * (left / seg))
-            break
-        out.append(b)
-        left -= seg
-    return out
-
-
 def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_displacement: float,
                link_lost: bool, heading: float = 0.0, overshoot: float = 0.0, linkmap: LinkMap | None = None,
                resume: Way | None = None, map_depth: float = 0.0, map_seek: float = 0.0) -> Route:
@@ -263,14 +248,14 @@ def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_dis
     earlier block of the same chain was on, picked up where the robot is: a chain never drives a stretch twice.
 
     LINK after a loss: the target is the nearest place back along the way, at or beyond the last link-good crumb,
-    that ``linkmap`` says reliably holds the link, ``map_depth`` metres into it (a place on the fringe of a good cell
-    is still the fringe) but no further than halfway to a place seen to fail beyond it; with no such place, the last
-    link-good crumb itself, ``overshoot`` metres further back (the navigator counts as arrived within
-    RTL_ARRIVE_R of the route's end, and the tag lags the link). The route
-    also carries ``onward``: the way beyond the target, which the service follows when the target turns out to be
-    a dead zone (docs/architecture.md §6): the crumb target's whole way on; the map's place's way into the next
-    stretch where the link held, or ``map_seek`` metres (LNK_MAP_SEEK). Otherwise (ORIGIN, or a return commanded
-    over a good link): the trail's start. The route is cut where it first leaves the displacement circle (FIG. 4C).
+    that ``linkmap`` says reliably holds the link, ``map_depth`` metres into it (a place on the fringe of a good
+    cell is still the fringe) but no further than halfway to a place seen to fail beyond it; with no such place, the
+    last link-good crumb itself, ``overshoot`` metres further back (the navigator counts as arrived within
+    RTL_ARRIVE_R of the route's end, and the tag lags the link). The route also carries ``onward``: the way beyond
+    the target, which the service follows when the target turns out to be a dead zone (docs/architecture.md §6): the
+    crumb target's whole way on; the map's place's way into the next stretch where the link held, or ``map_seek``
+    metres (LNK_MAP_SEEK). Otherwise (ORIGIN, or a return commanded over a good link): the trail's start. The route
+    is cut where it first leaves the displacement circle (FIG. 4C).
     """
     if target is Target.HEADING:
         s = np.asarray(start, dtype=float)
@@ -306,9 +291,9 @@ def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_dis
                 # into the place, but no further than halfway to where the way next meets a place the link was
                 # seen to fail (a null, a loop back through a dead stretch): that is a fringe like the one it
                 # entered by (an unvisited cell beside the trail is not: a trail runs along cell edges)
-                out = linkmap.first_reliable(way.points, skip=at, poor=True)
-                extra = map_depth if out is None else min(map_depth, 0.5 * (_along(way.points, *out) - at))
-                onward_to = _next_stretch(linkmap, way.points, at, map_depth, map_seek)
+                gap = linkmap.first_reliable(way.points, skip=at, poor=True)
+                extra = map_depth if gap is None else min(map_depth, 0.5 * (_along(way.points, *gap) - at))
+                onward_to = _next_stretch(linkmap, way.points, at, gap, map_depth, map_seek)
     at = min(at, total)
     head, _, k = _cut(way.points, at)
     gx, gy = float(head[-1, 0]), float(head[-1, 1])
@@ -327,16 +312,17 @@ def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_dis
     return Route(pts, (gx, gy), goal if goal >= 0 else -1, cut, speeds[: len(pts)], onward, way, by_map)
 
 
-def _next_stretch(linkmap: LinkMap, pts: np.ndarray, at: float, depth: float, seek: float) -> float:
+def _next_stretch(linkmap: LinkMap, pts: np.ndarray, at: float, gap: tuple[int, float] | None, depth: float,
+                  seek: float) -> float:
     """Metres along ``pts`` a return may go on to when it reached the place the map vouched for (``at``) and the
-    link is still down: into the next separate stretch the map says held the link (past one where it was seen to
-    fail), or, with none, ``seek`` metres on (LNK_MAP_SEEK; 0: it stays). Going on inside one good stretch does
-    not help: the place held the link, so what is missing now is not the place (the station went down, the link
-    is jammed), and every metre more is a metre further from where the operator left the robot, unless the owner
-    expects the station's range to shrink and says how far to look (docs/architecture.md §6)."""
+    link is still down: into the next separate stretch the map says held the link (past ``gap``, the first place
+    beyond ``at`` where it was seen to fail), or, with none, ``seek`` metres on (LNK_MAP_SEEK; 0: it stays). Going
+    on inside one good stretch does not help: the place held the link, so what is missing now is not the place (the
+    station went down, the link is jammed), and every metre more is a metre further from where the operator left the
+    robot, unless the owner expects the station's range to shrink and says how far to look (docs/architecture.md
+    §6)."""
     total = polyline_length(pts)
     nowhere = min(total, at + seek)
-    gap = linkmap.first_reliable(pts, skip=at, poor=True)
     if gap is None:
         return nowhere
     again = linkmap.first_reliable(pts, skip=_along(pts, *gap))
