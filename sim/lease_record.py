@@ -6,7 +6,7 @@ they keep the same record and ``sim.metrics`` reads both.
 A mixin, because both runs own the loop and the record is a few calls inside it: ``_vehicle_state(v)`` before the
 vehicle's tick and ``_vehicle_ticked(v, t, before)`` after it, ``_track_block(v, t, pos, cur, returning)`` once a
 tick after the per-tick row was appended to ``self._rows`` (rows start with t, true x, true y), ``_close_block``
-when the run ends. The host provides ``vehicle``, ``world``, ``t`` and ``_rows``.
+when the run ends. The host provides ``vehicle``, ``world``, ``t``, ``frame_offset`` and ``_rows``.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ class BlockRecord:
     start: tuple[float, float]
     command: str = ""
     target: tuple[float, float] | None = None
-    target_true: tuple[float, float] | None = None  # where the robot truly was when it laid the target crumb
+    target_true: tuple[float, float] | None = None  # where the robot truly was at the target (crumb or map place)
     max_disp_allowed: float = math.inf
     ended: float | None = None
     end: tuple[float, float] | None = None
@@ -134,12 +134,26 @@ class LeaseRecord:
             blk.route = st.route.points if blk.route is None else np.vstack([blk.route, st.route.points])
             if blk.target is None and st.route.target is not None:
                 blk.target = st.route.target
-                k = st.route.target_index
-                times = v.trail.times()
-                if 0 <= k < len(times):
-                    blk.target_true = self.true_at(float(times[k]))
+                blk.target_true = self._target_true(v, st.route)
         if blk.max_disp_allowed == math.inf:
             blk.max_disp_allowed = st.max_displacement
+
+    def _target_true(self, v, route) -> tuple[float, float] | None:
+        """Where in the true frame the robot was at the place ``route`` heads for. A crumb target: when the crumb
+        was laid. The map's place lies on the way back but is not a crumb (a kept trail stretch may be metres long):
+        where the robot was when its estimate passed nearest the place, in the ticks recorded so far."""
+        if not route.by_map:
+            k, times = route.target_index, v.trail.times()
+            return self.true_at(float(times[k])) if 0 <= k < len(times) else None
+        rows = self._rows
+        if not rows:
+            return None
+        ox, oy = self.frame_offset
+        est = np.array([(r[3], r[4]) for r in rows], dtype=float)
+        d = np.hypot(est[:, 0] - (route.target[0] + ox), est[:, 1] - (route.target[1] + oy))
+        if not np.isfinite(d).any():  # no estimate yet (a companion before its autopilot booted)
+            return None
+        return self._true_of(int(np.nanargmin(d)))
 
     def _close_block(self) -> None:
         if not self.blocks or self.blocks[-1].ended is not None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 from link.linkmap_format import decode
 from sim import outputs
@@ -26,3 +27,17 @@ def test_tunnel_linkmap_csv_is_good_near_the_station_and_dead_deep_in_the_tunnel
     assert sum(c.lower > threshold for c in near) >= 8
     assert all(c.delivery < 0.1 for c in deep)
     assert any(c.rssi_dbm < -100 for c in deep)  # the vehicle's radio saw the signal die there
+
+
+def test_a_return_to_the_maps_place_is_measured_against_that_place_not_the_crumb_target():
+    # building, rover, seed 5: the last link-good crumb is deep in the far room, 4 m short of the doorway the map
+    # vouches for; the return drives to the doorway, so that is where its final target error is measured from
+    run = Run(load("building"), "rover", 5).run()
+    m = outputs.compute(run)
+    first = run.blocks[0]
+    assert first.command == "RETURN_TO_LINK" and first.reason == "COMPLETED"
+    assert first.route_obj.by_map
+    # the true place lies where the route's target is (the native estimator drifts well under a metre here)
+    assert math.dist(first.target_true, first.target) < 1.0
+    assert m["final_target_error_m"] < 1.5
+    assert not m["failures"]
