@@ -29,11 +29,10 @@ from vehicle.companion.setup import check
 from vehicle.companion.setup import differing as needs_differing
 
 ROOT = Path(__file__).resolve().parents[1]
-# s: the tunnel's link dies near 44 s, the return brings it back near 53 s and the operator takes over at 54 s. Not
-# longer: ArduPilot SITL's own threads make its runs repeatable to a tick or so (sim/firmware/metrics.py), and on
-# the operator's drive home after the return such a tick was seen to decide whether the rover scrapes the adit's
-# wall at the bend (two outcomes in three runs of 75 s, identical up to 60 s)
-DURATION = 60.0
+# s: the tunnel's link dies near 44 s, the return brings it back near 53 s and the operator takes over at 54 s and
+# drives home from the bend, where the return left the rover beside the wall: until the operator kept the rover on
+# its way (sim/firmware/operator.py ``_aim``) that drive scraped the adit's wall, so the run goes on past it
+DURATION = 75.0
 
 
 @pytest.fixture(scope="module")

@@ -3,10 +3,11 @@
 It is the firmware's counterpart of ``sim.operator.Operator`` and knows only what reached it over the radio. It
 sends a GCS heartbeat every second (what keeps the firmware's GCS failsafe quiet, and nothing else does), asks for
 the local position at 5 Hz, switches to GUIDED and arms (retrying each second until the heartbeat shows it), then
-drives the scenario route as a GUIDED user does: a speed (DO_CHANGE_SPEED) and a position target per waypoint
-(SET_POSITION_TARGET_LOCAL_NED, position only; the firmware steers), the next one once its telemetry shows the
-rover within ``WAYPOINT_RADIUS``. Position targets do not time out in Rover: a target sent before the link died is
-still driven to until the failsafe changes the mode, which is what the real firmware does to a real operator.
+drives the scenario route as a GUIDED user does: a speed (DO_CHANGE_SPEED) and position targets
+(SET_POSITION_TARGET_LOCAL_NED, position only; the firmware steers) that keep the rover on the way to each waypoint
+(``_aim``), the next waypoint once its telemetry shows the rover within ``WAYPOINT_RADIUS``. Position targets do not
+time out in Rover: a target sent before the link died is still driven to until the failsafe changes the mode, which
+is what the real firmware does to a real operator.
 
 When its picture freezes it keeps its heartbeat going and stops sending targets. When it hears the rover again and
 sees the firmware's failsafe has done its work (the rover in HOLD, or at rest in RTL/SMART_RTL for
@@ -35,6 +36,8 @@ GUIDED, HOLD, RTL, SMART_RTL = 15, 4, 11, 12
 RETURN_MODES = frozenset((HOLD, RTL, SMART_RTL))
 POSITION_ONLY = 0x0DF8  # SET_POSITION_TARGET type mask: x, y, z used; velocity, acceleration, yaw, yaw rate not
 LOCAL_POSITION_INTERVAL_US = 200_000
+CARROT_M = 6.0  # m: how far ahead on the way the operator puts its target (beyond the firmware's WP_RADIUS of 2 m)
+CARROT_STEP_M = 1.0  # m: the target is moved on once the rover's progress would move it this far
 
 
 class FirmwareOperator:
@@ -190,6 +193,31 @@ class FirmwareOperator:
             return
         x, y, speed = leg.points[leg.index]
         self.heading_to = (x, y)
-        if self.sent_target != (x, y) or t >= self.next_retry:
+        aim = self._aim(leg)
+        sent = self.sent_target
+        moved = sent is None or (aim != sent and (aim == (x, y) or math.dist(aim, sent) >= CARROT_STEP_M))
+        if moved or t >= self.next_retry:
             self.next_retry = t + 2 * RETRY_S  # a target is idempotent: resent now and then against a lost packet
-            self._goto(x, y, speed)
+            self._goto(*aim, speed)
+
+    def _aim(self, leg: Leg) -> tuple[float, float]:
+        """Where to send the rover on its way to the leg's current waypoint: a point ``CARROT_M`` ahead of it on
+        the stretch from the waypoint before, or the waypoint itself when that is nearer or there is none.
+
+        GUIDED steers straight at a position target, and a person steering a rover down a tunnel keeps it on the
+        way, not on the line from wherever it stands to a waypoint 45 m off: from a rest place beside the tunnel's
+        wall (where a return leaves it, 1.4 m off the middle at the bend) that line runs along the wall and the
+        rover scrapes it all the way."""
+        x, y = leg.points[leg.index][:2]
+        if leg.index == 0 or self.position is None:
+            return x, y
+        ax, ay = leg.points[leg.index - 1][:2]
+        dx, dy = x - ax, y - ay
+        length = math.hypot(dx, dy)
+        if length < 1e-9:
+            return x, y
+        ux, uy = dx / length, dy / length
+        along = max(0.0, (self.position[0] - ax) * ux + (self.position[1] - ay) * uy) + CARROT_M
+        if along >= length:
+            return x, y
+        return ax + along * ux, ay + along * uy
