@@ -41,7 +41,9 @@ BUILTIN = ("tunnel", "warehouse", "loop", "open", "handover", "building", "culve
 # scenario names for the mission items of a return plan
 PLAN_COMMANDS = {"RETURN_TO_LINK": NAV_RETURN_TO_LINK, "BOUNDARY": LEASE_BOUNDARY, "LOITER": NAV_LOITER_TIME,
                  "RETURN_TO_LAUNCH": NAV_RETURN_TO_LAUNCH, "WAYPOINT": NAV_WAYPOINT}
-EVENT_ACTIONS = ("jam", "unjam", "kill_gcs", "revive_gcs", "takeover", "rtl", "param", "claim", "stop")
+EVENT_ACTIONS = ("jam", "unjam", "kill_gcs", "revive_gcs", "power", "takeover", "rtl", "param", "claim", "stop")
+STATION_POWER_DBM = (-30.0, 40.0)  # a station's transmit power ([[world.stations]] power_dbm)
+POWER_STEP_DB = STATION_POWER_DBM[1] - STATION_POWER_DBM[0]  # the largest change a "power" event may make
 # the keys of each plan command, by the field of link.plan_items.KINDS they fill (1..4 = param1..4, 5/6 = x/y)
 PLAN_KEYS = {NAV_RETURN_TO_LINK: {"max_displacement": 1, "speed": 2, "target": 3, "on_regain": 4},
              NAV_LOITER_TIME: {"time": 1}, NAV_WAYPOINT: {"x": 5, "y": 6}}
@@ -298,7 +300,7 @@ def _world(r: _Reader, raw: dict) -> tuple[tuple[float, ...], tuple[Wall, ...], 
         if not 1 <= sysid <= 255:
             raise r.fail(f"{p}.sysid", f"must be 1..255, got {sysid}")
         stations.append(Station(r.get(s, "name", f"{p}.name", str), x, y, sysid,
-                                r.number(s, "power_dbm", f"{p}.power_dbm", 20.0, -30.0, 40.0)))
+                                r.number(s, "power_dbm", f"{p}.power_dbm", 20.0, *STATION_POWER_DBM)))
     if not stations:
         raise r.fail("world.stations", "needs at least one ground station")
     return tuple(float(c) for c in b), tuple(walls), denied, tuple(stations)
@@ -394,6 +396,13 @@ def _events(r: _Reader, raw: dict, stations: tuple[Station, ...]) -> tuple[Event
                       r.get(ev, "name", f"{p}.name", str, ""), r.number(ev, "value", f"{p}.value", 0.0))
         if action == "param":
             _param(r, event.name, event.value, f"{p}.name")
+        elif action == "power":
+            # the station's transmit power changes by ``value`` dB (its range shrinks or grows: a station carried
+            # back from the edge, a battery saver, an antenna knocked over). A change, not a level, so it means the
+            # same on top of a campaign's power_dbm axis
+            if "value" not in ev:
+                raise r.fail(f"{p}.value", "a power event needs the change in the station's transmit power (dB)")
+            r.number(ev, "value", f"{p}.value", lo=-POWER_STEP_DB, hi=POWER_STEP_DB)
         events.append(event)
     return tuple(sorted(events, key=lambda e: e.t))
 

@@ -4,9 +4,14 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
 
 from link.linkmap_format import decode
 from sim import outputs
+from sim.campaign.spec import load_spec
 from sim.runner import Run
 from sim.scenario import load
 from vehicle.linkmap import MapConfig
@@ -41,3 +46,33 @@ def test_a_return_to_the_maps_place_is_measured_against_that_place_not_the_crumb
     assert math.dist(first.target_true, first.target) < 1.0
     assert m["final_target_error_m"] < 1.5
     assert not m["failures"]
+
+
+SPECS = Path(__file__).resolve().parents[1] / "sim" / "campaign" / "specs"
+
+
+@pytest.mark.parametrize("spec", sorted(p.name for p in SPECS.glob("*.toml")))
+def test_every_shipped_campaign_spec_and_its_worlds_load(spec):
+    assert load_spec(SPECS / spec).trials
+
+
+def test_where_the_stations_range_shrank_lnk_map_seek_looks_on_and_zero_stays():
+    # the station's power falls 40 dB while the robot is in the adit: the place the map vouched for (recorded at
+    # full power) no longer holds the link. At 0 the return stays there and the plan's 30 s loiter follows; at 40 m
+    # it carries on back along the trail to where the weaker station reaches
+    sc = load(str(SPECS / "worlds" / "shrink.toml"))
+    runs = {}
+    for seek in (0.0, 40.0):
+        run = Run(replace(sc, params={**sc.params, "LNK_MAP_SEEK": seek}), "rover", 1).run()
+        runs[seek] = (run, outputs.compute(run))
+    (stay, m_stay), (seek, m_seek) = runs[0.0], runs[40.0]
+    assert m_stay["loss_position"] == m_seek["loss_position"]  # the same drive out
+    first = stay.blocks[0]
+    assert first.route_obj.by_map and first.reason == "COMPLETED"
+    assert stay.blocks[1].command == "LOITER"  # it waited where the map said the link was
+    assert m_stay["link_regained_s"] - m_stay["link_lost_s"] > 30.0
+    assert seek.blocks[0].reason == "LINK_REGAINED"  # in its first block, on past the place the map vouched for
+    loss = m_seek["loss_position"]
+    assert math.dist(seek.blocks[0].end, loss) > math.dist(first.end, loss) + 1.0
+    assert m_seek["link_regained_s"] - m_seek["link_lost_s"] < 15.0
+    assert m_seek["regained_by"] == "return" and m_seek["collisions"] == 0

@@ -112,6 +112,9 @@ FULL = GOOD.replace('attenuation_db = "loud"', "attenuation_db = 3").replace(
      "no vehicle parameter"),
     (("[operator]", "[criteria]\nchain_reasons = [\"DONE\"]\n[operator]"), "criteria.chain_reasons",
      "unknown reason"),
+    (("[operator]", "[[events]]\nt = 3\naction = \"power\"\n[operator]"), "events[0].value", "needs the change"),
+    (("[operator]", "[[events]]\nt = 3\naction = \"power\"\nvalue = -90\n[operator]"), "events[0].value",
+     "within -70.0..70.0"),
 ])
 def test_misspelt_nonfinite_and_out_of_range_fields_are_named(edit, field, needle):
     scenario.parse(FULL, "x.toml")  # the unedited text is fine
