@@ -346,30 +346,52 @@ def _add_run_campaign_options(run) -> None:
 
 
 def _cmd_sim_serve_firmware(args: argparse.Namespace, sc) -> int:
-    """`sim serve --vehicle ardurover`: the firmware, paced by itself, behind the radio proxy."""
+    """`sim serve --vehicle ardurover`: the firmware, paced by itself, behind the radio proxy; with --policy companion,
+    returnlink companion between the two."""
+    from link.storage import StoredFileError
     from sim.firmware.process import FirmwareError, stop_on_terminate
     from sim.firmware.report import trajectory
     from sim.firmware.serve import FirmwareServer
+    from sim.policies import COMPANION_POLICY
 
     policy = _policy_for(args, "ardurover")
     firmware = _firmware(args.firmware)
-    for flag in ("params", "key", "state"):
-        if getattr(args, flag):
-            raise _fail(f"--{flag} configures returnlink's own vehicle; the ArduPilot firmware keeps its parameters "
-                        "and signing in itself (set them over MAVLink)")
+    companion = policy == COMPANION_POLICY
+    if not companion:
+        for flag in ("params", "key", "state"):
+            if getattr(args, flag):
+                raise _fail(f"--{flag} configures returnlink's own vehicle (or, with --policy companion, the "
+                            "companion); the ArduPilot firmware keeps its parameters and signing in itself (set "
+                            "them over MAVLink)")
     out = Path(args.out) if args.out else Path("out") / f"serve-{sc.name}-ardurover"
     _writable_dir(out)
     peers = tuple(args.peer) if args.peer else (("127.0.0.1", 14550), ("127.0.0.1", 14540))
     try:
-        server = FirmwareServer(sc, args.seed, policy, firmware, args.port, peers, args.perfect_link, args.speedup,
-                                args.duration, log_path=out / "firmware.log")
+        if companion:
+            from sim.firmware.companion_serve import CompanionServer
+
+            params = _parm_file(args.params)
+            keystore, epochs = _serve_state(args)
+            server = CompanionServer(sc, args.seed, firmware, args.port, peers, args.perfect_link, args.speedup,
+                                     args.duration, log_path=out / "firmware.log", param_file=params,
+                                     keystore=keystore, epochs_file=epochs)
+            _warn_heartbeat_speedup(args.speedup, server.companion.params["LNK_TIMEOUT"], "companion")
+        else:
+            keystore = None
+            server = FirmwareServer(sc, args.seed, policy, firmware, args.port, peers, args.perfect_link,
+                                    args.speedup, args.duration, log_path=out / "firmware.log")
+    except StoredFileError as e:  # a damaged kept file: refuse to start rather than boot on defaults
+        raise _fail(str(e)) from None
     except OSError as e:
         print(f"returnlink: error: cannot bind 127.0.0.1:{args.port}: {e}", file=sys.stderr)
         return 2
     host, port = server.address
-    print(f"returnlink: {sc.name} with the ArduPilot firmware ({firmware}, policy {policy}) on udp {host}:{port}, "
+    what = ("returnlink companion on the firmware's telemetry port" if companion else f"policy {policy}")
+    print(f"returnlink: {sc.name} with the ArduPilot firmware ({firmware}, {what}) on udp {host}:{port}, "
           "sending to " + ", ".join(f"{h}:{p}" for h, p in peers)
-          + ("" if args.perfect_link else ", through the radio model"), file=sys.stderr, flush=True)
+          + ("" if args.perfect_link else ", through the radio model")
+          + ("" if keystore is None else f"; the companion signs with key {keystore.key.fingerprint} from "
+             f"{keystore.path}"), file=sys.stderr, flush=True)
     try:
         with stop_on_terminate():
             server.run()
@@ -381,6 +403,35 @@ def _cmd_sim_serve_firmware(args: argparse.Namespace, sc) -> int:
     if server.rows:
         print(f"returnlink: wrote {trajectory(server, out / 'trajectory.png')}", file=sys.stderr)
     return 0
+
+
+def _serve_state(args: argparse.Namespace):
+    """`sim serve`'s signing key (--key) and where the epochs it issues are kept (--state): (keystore or None,
+    path), the state directory created; a bad key file or an uncreatable directory exits 2."""
+    from link.storage import StoredFileError
+
+    keystore = None
+    if args.key:
+        from vehicle.keystore import KeyStore
+
+        try:
+            keystore = KeyStore.open(args.key)
+        except StoredFileError as e:
+            raise _fail(f"key file {e}") from None
+    epochs = _epochs_file(args)
+    try:
+        epochs.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise _fail(f"cannot create the state directory {epochs.parent}: {e.strerror or e}") from None
+    return keystore, epochs
+
+
+def _warn_heartbeat_speedup(speedup: float, timeout: float, who: str) -> None:
+    """Ground stations heartbeat once a wall-clock second: at --speedup K that is once every K simulated s."""
+    if speedup > 1 and speedup >= timeout / 1.5:
+        print(f"returnlink: warning: ground stations send a heartbeat once a wall-clock second, which at --speedup "
+              f"{speedup:g} is once every {speedup:g} simulated s; with LNK_TIMEOUT {timeout:g} s the {who} will "
+              f"think an idle station lost. Raise LNK_TIMEOUT or lower --speedup.", file=sys.stderr)
 
 
 def _cmd_sim_serve(args: argparse.Namespace) -> int:
@@ -397,22 +448,7 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
     if args.out:
         _writable_dir(Path(args.out))  # the plot is written on exit: know now that it can be
     peers = tuple(args.peer) if args.peer else (("127.0.0.1", 14550), ("127.0.0.1", 14540))
-    keystore = None
-    if args.key:
-        from vehicle.keystore import KeyStore
-
-        try:
-            keystore = KeyStore.open(args.key)
-        except StoredFileError as e:
-            print(f"returnlink: error: key file {e}", file=sys.stderr)
-            return 2
-    epochs = _epochs_file(args)
-    try:
-        epochs.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        print(f"returnlink: error: cannot create the state directory {epochs.parent}: {e.strerror or e}",
-              file=sys.stderr)
-        return 2
+    keystore, epochs = _serve_state(args)
     try:
         server = Server(sc, args.vehicle, args.seed, args.port, peers, args.perfect_link, params, keystore, epochs)
     except StoredFileError as e:  # a damaged kept file: refuse to start rather than boot on defaults
@@ -421,11 +457,7 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
     except OSError as e:
         print(f"returnlink: error: cannot bind 127.0.0.1:{args.port}: {e}", file=sys.stderr)
         return 2
-    timeout = server.vehicle.params["LNK_TIMEOUT"]
-    if args.speedup > 1 and args.speedup >= timeout / 1.5:
-        print(f"returnlink: warning: ground stations send a heartbeat once a wall-clock second, which at --speedup "
-              f"{args.speedup:g} is once every {args.speedup:g} simulated s; with LNK_TIMEOUT {timeout:g} s the "
-              f"vehicle will think an idle station lost. Raise LNK_TIMEOUT or lower --speedup.", file=sys.stderr)
+    _warn_heartbeat_speedup(args.speedup, server.vehicle.params["LNK_TIMEOUT"], "vehicle")
     host, port = server.address
     print(f"returnlink: {sc.name} ({server.kind}) on udp {host}:{port}, sending to "
           + ", ".join(f"{h}:{p}" for h, p in peers) + ("" if args.perfect_link else ", through the radio model")
@@ -466,7 +498,7 @@ def _cmd_keys(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from sim.policies import DEFAULT_POLICY, FAILSAFE_POLICIES, POLICY_NAMES
+    from sim.policies import COMPANION_POLICY, DEFAULT_POLICY, FAILSAFE_POLICIES, POLICY_NAMES
 
     p = argparse.ArgumentParser(
         prog="returnlink", description="Lease-based automated return to link for MAVLink robots.")
@@ -498,8 +530,9 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("scenario", help="a built-in scenario name or a .toml file")
     serve.add_argument("--vehicle", choices=["rover", "legged", "ardurover"],
                        help="robot model (default: the scenario's); ardurover: the real ArduPilot firmware")
-    serve.add_argument("--policy", choices=FAILSAFE_POLICIES,
-                       help="with --vehicle ardurover: its GCS failsafe (default ardupilot-smartrtl)")
+    serve.add_argument("--policy", choices=(*FAILSAFE_POLICIES, COMPANION_POLICY),
+                       help="with --vehicle ardurover: its GCS failsafe (default ardupilot-smartrtl), or companion: "
+                            "returnlink companion on its telemetry port (--params, --key, --state configure it)")
     _add_firmware_option(serve)
     serve.add_argument("--seed", type=types.SEED)
     serve.add_argument("--speedup", type=types.SPEEDUP, default=1.0, help="run K times faster than real time")

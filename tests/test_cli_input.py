@@ -110,3 +110,27 @@ def test_bad_parm_files_exit_2_by_file_and_line(tmp_path, capsys):
     parm.write_text("LNK_TIMEOUT 3\nNOPE 1\n")
     err = exits_2(["gcs", "--url", "udpin:127.0.0.1:1", "--timeout", "0.2", "param", "load", str(parm)], capsys)
     assert f"{parm}:2: NOPE: unknown parameter" in err
+
+
+def test_a_served_companions_bad_files_exit_2_before_the_firmware_boots(tmp_path, monkeypatch, capsys):
+    # --params, --key and --state configure the companion under `sim serve --vehicle ardurover --policy companion`,
+    # checked as the native vehicle's are, before any firmware process is started
+    from sim.firmware import serve as firmware_serve
+
+    monkeypatch.setattr(firmware_serve.FirmwareServer, "run", lambda self: pytest.fail("served a bad set-up"))
+    fake = tmp_path / "ardurover"
+    fake.write_text("#!/bin/sh\nexit 1\n")
+    fake.chmod(0o755)
+    base = ["sim", "serve", "tunnel", "--vehicle", "ardurover", "--policy", "companion", "--firmware", str(fake),
+            "--out", str(tmp_path / "out"), "--port", "0"]
+    parm = tmp_path / "bad.parm"
+    parm.write_text("LNK_TIMEOUT 3\nRTL_SPEED 99\n")
+    assert f"{parm}:2: RTL_SPEED: 99 outside 0..5" in exits_2([*base, "--params", str(parm)], capsys)
+    assert "key file" in exits_2([*base, "--key", str(tmp_path / "missing.key")], capsys)
+    blocked = tmp_path / "file"
+    blocked.write_text("")
+    assert "cannot create the state directory" in exits_2([*base, "--state", str(blocked / "sub")], capsys)
+    # the firmware's own failsafes keep refusing what would configure returnlink
+    err = exits_2(["sim", "serve", "tunnel", "--vehicle", "ardurover", "--firmware", str(fake), "--params",
+                   str(parm)], capsys)
+    assert "--params configures returnlink's own vehicle" in err

@@ -1,5 +1,5 @@
 """`sim serve --vehicle ardurover`: the firmware in real time (here 20x) behind the radio proxy, answering an
-ordinary pymavlink ground station on loopback."""
+ordinary pymavlink ground station on loopback, alone or with returnlink companion on its telemetry port."""
 
 from __future__ import annotations
 
@@ -10,9 +10,12 @@ import time
 
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
+from gcs.station import GroundStation, mav
+from sim.firmware.companion_serve import CompanionServer
 from sim.firmware.serve import FirmwareServer
 from sim.scenario import load
 from tests.firmware_helpers import firmware_or_skip
+from vehicle.companion.router import COMPANION_COMPID
 
 
 def test_a_plain_ground_station_hears_and_commands_the_served_firmware():
@@ -49,3 +52,51 @@ def test_a_plain_ground_station_hears_and_commands_the_served_firmware():
     assert seen["ack"].result == apm.MAV_RESULT_ACCEPTED
     assert not thread.is_alive() and not server.link.process.alive()
     assert server.rows and server.link.tap.version.startswith("ArduRover")
+
+
+def test_a_ground_station_takes_control_through_the_served_companion(tmp_path):
+    """`sim serve --vehicle ardurover --policy companion`: the firmware's own stream and the companion's reach an
+    ordinary ground station, which takes control through the companion (the lease the companion keeps)."""
+    firmware = firmware_or_skip()
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    gcs.bind(("127.0.0.1", 0))
+    gcs.settimeout(0.05)
+    server = CompanionServer(load("tunnel"), 1, firmware, port=0, peers=(gcs.getsockname(),), perfect_link=True,
+                             speedup=20.0, duration=60.0, out=io.StringIO(),
+                             epochs_file=tmp_path / "returnlink.epochs")
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    gs = GroundStation(255, 190, target=1, target_comp=COMPANION_COMPID)
+    parser = apm.MAVLink(None, srcSystem=255, srcComponent=190)
+    heard: dict[int, object] = {}
+    pending = None
+    t0 = time.monotonic()
+    owned = None  # the LEASE_STATUS that first showed the station as the owner
+    try:
+        # the station keeps its heartbeat going until the server's run ends, so the lease it took stays its own
+        while thread.is_alive() and time.monotonic() - t0 < 90:
+            now = (time.monotonic() - t0) * 20.0  # the station keeps its once-a-second cadence in simulated time
+            for frame in gs.tick(now):
+                gcs.sendto(frame, server.address)
+            try:
+                data, _ = gcs.recvfrom(65535)
+            except TimeoutError:
+                continue
+            gs.feed(data, now)
+            for m in parser.parse_buffer(data) or ():
+                if m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 1:
+                    heard[m.get_srcComponent()] = m
+            if pending is None and gs.vehicle.status is not None:
+                pending = gs.acquire()
+            if owned is None and pending is not None and pending.done and gs.vehicle.status.owner == 255:
+                owned = gs.vehicle.status
+    finally:
+        thread.join(90)
+        gcs.close()
+    assert heard[1].autopilot == apm.MAV_AUTOPILOT_ARDUPILOTMEGA  # the firmware's own heartbeat, relayed
+    assert COMPANION_COMPID in heard  # and the companion's beside it
+    assert pending is not None and pending.ok
+    assert owned is not None and owned.state == mav.RETURNLINK_STATE_TELEOP
+    assert not thread.is_alive() and not server.link.process.alive()
+    assert server.companion.vehicle is not None and server.companion.vehicle.book.owner == 255
+    assert "lease teleop" in server.out.getvalue()  # the status line says who holds the lease

@@ -53,8 +53,12 @@ class FirmwareServer(FirmwareRun):
         proxy.flush(t)
         for data, _addr in proxy.from_ground(t):
             self.link.send(data)
+        self._record_tick(t)
+
+    def _record_tick(self, t: float) -> None:
+        """The tick's row for the plot, and every 5 simulated s a status line."""
         x, y, _ = self.robot.pose
-        st = proxy.state
+        st = self.proxy.state
         link, rssi = (1.0, math.nan) if st is None else (st.delivery, st.rssi_dbm)
         mode = -1 if self.link.tap.mode is None else self.link.tap.mode
         self.rows.append((t, x, y, math.nan, math.nan, mode, link, rssi, *self.link.cmd, self.link.tap.armed,
@@ -64,7 +68,11 @@ class FirmwareServer(FirmwareRun):
             quality = "perfect" if st is None else f"{st.rssi_dbm:6.1f} dBm, delivery {st.delivery:4.2f}"
             tap = self.link.tap
             print(f"t={t:7.1f} s  {MODE_NAMES.get(tap.mode, '?'):<10} {'armed' if tap.armed else 'disarmed'}"
-                  f"  pos ({x:6.1f}, {y:6.1f})  link {quality}", file=self.out, flush=True)
+                  f"  pos ({x:6.1f}, {y:6.1f})  link {quality}{self._status()}", file=self.out, flush=True)
+
+    def _status(self) -> str:
+        """What else the status line says (the companion's lease)."""
+        return ""
 
     def run(self) -> FirmwareServer:
         try:
