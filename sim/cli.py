@@ -371,7 +371,10 @@ def _cmd_sim_serve_firmware(args: argparse.Namespace, sc) -> int:
             from sim.firmware.companion_serve import CompanionServer
 
             params = _parm_file(args.params)
-            keystore, epochs = _serve_state(args)
+            state = _serve_state(args)
+            if state is None:
+                return 2
+            keystore, epochs = state
             server = CompanionServer(sc, args.seed, firmware, args.port, peers, args.perfect_link, args.speedup,
                                      args.duration, log_path=out / "firmware.log", param_file=params,
                                      keystore=keystore, epochs_file=epochs)
@@ -407,7 +410,7 @@ def _cmd_sim_serve_firmware(args: argparse.Namespace, sc) -> int:
 
 def _serve_state(args: argparse.Namespace):
     """`sim serve`'s signing key (--key) and where the epochs it issues are kept (--state): (keystore or None,
-    path), the state directory created; a bad key file or an uncreatable directory exits 2."""
+    path), the state directory created; a bad key file or an uncreatable directory: the message, and None (exit 2)."""
     from link.storage import StoredFileError
 
     keystore = None
@@ -417,12 +420,15 @@ def _serve_state(args: argparse.Namespace):
         try:
             keystore = KeyStore.open(args.key)
         except StoredFileError as e:
-            raise _fail(f"key file {e}") from None
+            print(f"returnlink: error: key file {e}", file=sys.stderr)
+            return None
     epochs = _epochs_file(args)
     try:
         epochs.parent.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        raise _fail(f"cannot create the state directory {epochs.parent}: {e.strerror or e}") from None
+        print(f"returnlink: error: cannot create the state directory {epochs.parent}: {e.strerror or e}",
+              file=sys.stderr)
+        return None
     return keystore, epochs
 
 
@@ -448,7 +454,10 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
     if args.out:
         _writable_dir(Path(args.out))  # the plot is written on exit: know now that it can be
     peers = tuple(args.peer) if args.peer else (("127.0.0.1", 14550), ("127.0.0.1", 14540))
-    keystore, epochs = _serve_state(args)
+    state = _serve_state(args)
+    if state is None:
+        return 2
+    keystore, epochs = state
     try:
         server = Server(sc, args.vehicle, args.seed, args.port, peers, args.perfect_link, params, keystore, epochs)
     except StoredFileError as e:  # a damaged kept file: refuse to start rather than boot on defaults
