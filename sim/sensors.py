@@ -15,7 +15,7 @@ from pymunk._chipmunk_cffi import lib
 
 from sim.robots import Robot, normal_draws
 from sim.world import World
-from vehicle.io import Fix, Readings
+from vehicle.io import Fix, Readings, Scan
 
 _GET_ANGULAR_VELOCITY = lib.cpBodyGetAngularVelocity  # pymunk's property, without its Python layers
 # the named tuples' documented ``_make``: built from every field in order, without the generated ``__new__``'s
@@ -35,6 +35,10 @@ class SensorSpec:
     heading_std: float = 0.03  # rad
     accel_noise: float = 0.05  # m/s^2 per sample: forward accelerometer of the IMU
     accel_bias0: float = 0.02  # m/s^2 initial bias std
+    scan_hz: float = 2.0  # a planar range sensor's sweeps (0: the robot has none)
+    scan_beams: int = 90  # evenly around the robot: 4 degrees apart, a quarter metre apart at 3.6 m
+    scan_range: float = 8.0  # m
+    scan_std: float = 0.02  # m per beam
 
 
 class Sensors:
@@ -46,6 +50,10 @@ class Sensors:
         self.imu_rng = np.random.Generator(rng.bit_generator.jumped())
         self.accel_bias = self.imu_rng.normal(0.0, spec.accel_bias0)
         self.imu_normal = normal_draws(self.imu_rng).__next__  # the accelerometer noise: all the IMU draws after
+        # the range sensor: a stream of its own (two jumps ahead), for the same reason
+        self.scan_rng = np.random.Generator(rng.bit_generator.jumped(2))
+        self.scan_bearings = np.arange(spec.scan_beams) * (2.0 * math.pi / max(1, spec.scan_beams))
+        self._next_scan = 0.0
         self._next_fix = 0.0
         self._next_heading = 0.0
         self.fixes = 0
@@ -79,4 +87,17 @@ class Sensors:
             self._next_heading = t + 1.0 / s.heading_hz
             heading = robot.pose[2] + s.heading_std * normal()
         accel = robot.accel + self.accel_bias + s.accel_noise * self.imu_normal()
-        return _READINGS((t, robot.odometry_speed(dt), gyro, fix, heading, s.heading_std, accel))
+        scan = None
+        if s.scan_hz > 0.0 and t + 1e-9 >= self._next_scan:
+            self._next_scan = t + 1.0 / s.scan_hz
+            scan = self._scan()
+        return _READINGS((t, robot.odometry_speed(dt), gyro, fix, heading, s.heading_std, accel, scan))
+
+    def _scan(self) -> Scan:
+        """A sweep of the range sensor from the robot's true pose: each beam's distance to the first wall, with
+        noise, or inf where no wall is within reach."""
+        s = self.spec
+        x, y, yaw = self.robot.pose
+        r = self.world.ranges(x, y, yaw + self.scan_bearings, s.scan_range)
+        r = r + s.scan_std * self.scan_rng.standard_normal(len(r))
+        return Scan(self.scan_bearings, np.maximum(r, 0.0), s.scan_range)

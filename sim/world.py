@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
 import pymunk
 
 WALL, ROBOT = 1, 2
@@ -51,6 +52,26 @@ def _inside(x: float, y: float, edges: tuple[tuple[float, float, float, float], 
     return inside
 
 
+def _capsules(walls: tuple[Wall, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The walls' collision capsules as a range sensor sees them: each segment's two faces (px, py, ex, ey: a
+    start and its extent, offset by half the thickness either side) and its two round ends (cx, cy, radius)."""
+    faces, ends = [], []
+    for wall in walls:
+        h = wall.thickness / 2
+        for a, b in zip(wall.points[:-1], wall.points[1:], strict=True):
+            ex, ey = b[0] - a[0], b[1] - a[1]
+            n = (ex * ex + ey * ey) ** 0.5
+            if n < 1e-12:
+                ends.append((a[0], a[1], h))
+                continue
+            nx, ny = -ey / n * h, ex / n * h
+            faces.append((a[0] + nx, a[1] + ny, ex, ey))
+            faces.append((a[0] - nx, a[1] - ny, ex, ey))
+            ends.append((a[0], a[1], h))
+            ends.append((b[0], b[1], h))
+    return np.array(faces, dtype=float).reshape(-1, 4), np.array(ends, dtype=float).reshape(-1, 3)
+
+
 class World:
     def __init__(self, walls: tuple[Wall, ...], denied: tuple[tuple[tuple[float, float], ...], ...] = (),
                  stations: tuple[Station, ...] = ()) -> None:
@@ -69,6 +90,7 @@ class World:
                 seg.friction = 0.3
                 seg.attenuation_db = wall.attenuation_db  # type: ignore[attr-defined]
                 self.space.add(seg)
+        self._faces, self._ends = _capsules(walls)  # what a range sensor's beams can hit
         self.space.on_collision(ROBOT, WALL, begin=self._begin, separate=self._separate)
         self.step: Callable[[float], None] = self.space.step  # one physics step of dt seconds (every tick)
 
@@ -85,6 +107,32 @@ class World:
             if _inside(x, y, edges):
                 return True
         return False
+
+    def ranges(self, x: float, y: float, angles: np.ndarray, reach: float) -> np.ndarray:
+        """Distance from (x, y) along each world-frame angle (rad, from north toward east) to the first wall, as
+        the walls' collision shapes have it (capsules: a segment thickened by half the wall's thickness); inf where
+        nothing lies within ``reach``. All beams against all walls at once (a scan is a few dozen beams)."""
+        dx, dy = np.cos(angles)[:, None], np.sin(angles)[:, None]
+        best = np.full(len(angles), np.inf)
+        if len(self._faces):
+            px, py, ex, ey = (self._faces[:, k][None, :] for k in range(4))
+            wx, wy = px - x, py - y
+            den = dx * ey - dy * ex
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = (wx * ey - wy * ex) / den
+                u = (wx * dy - wy * dx) / den
+            ok = (np.abs(den) > 1e-12) & (t >= 0.0) & (u >= 0.0) & (u <= 1.0)
+            best = np.minimum(best, np.where(ok, t, np.inf).min(axis=1))
+        if len(self._ends):
+            cx, cy, h = (self._ends[:, k][None, :] for k in range(3))
+            wx, wy = cx - x, cy - y
+            along = dx * wx + dy * wy
+            disc = h * h - (wx * wx + wy * wy) + along * along
+            with np.errstate(invalid="ignore"):
+                t = along - np.sqrt(disc)
+            ok = (disc >= 0.0) & (t >= 0.0)
+            best = np.minimum(best, np.where(ok, t, np.inf).min(axis=1))
+        return np.where(best <= reach, best, np.inf)
 
     def attenuation_db(self, a: tuple[float, float], b: tuple[float, float]) -> float:
         """Total wall loss along the straight line a -> b (each wall segment crossed counts once)."""

@@ -6,7 +6,10 @@ it over pymunk. The vehicle loop sees nothing else of the robot.
 
 from __future__ import annotations
 
-from typing import NamedTuple, Protocol
+from typing import TYPE_CHECKING, NamedTuple, Protocol
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 class Fix(NamedTuple):
@@ -15,6 +18,16 @@ class Fix(NamedTuple):
     x: float
     y: float
     std: float
+
+
+class Scan(NamedTuple):
+    """One sweep of a planar range sensor (lidar, a depth camera's floor slice): per beam its bearing from the
+    robot's heading (rad, clockwise positive like the heading) and the range to the first return (m; ``max_range``
+    or more, or inf: nothing within reach). What the return uses it for: ``vehicle.clearance``."""
+
+    bearings: tuple[float, ...] | np.ndarray
+    ranges: tuple[float, ...] | np.ndarray
+    max_range: float
 
 
 class Readings(NamedTuple):
@@ -29,6 +42,7 @@ class Readings(NamedTuple):
     heading: float | None = None  # absolute heading (compass, lidar or visual odometry), rad
     heading_std: float = 0.05
     accel: float | None = None  # forward acceleration from the IMU, m/s^2 (None: the robot has no accelerometer)
+    scan: Scan | None = None  # a range sensor's sweep, when one was taken this tick (None: none, or no sensor)
 
 
 class RobotDriver(Protocol):
