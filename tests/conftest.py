@@ -28,7 +28,8 @@ if os.environ.get("CI"):
     settings.load_profile("ci")
 
 SLOW = {"test_campaign.py", "test_campaign_radio.py", "test_reaction_latency.py", "test_e2e_link.py",
-        "test_e2e_scenarios.py", "test_fuzz.py", "test_golden_runs.py", "test_policies.py", "test_linkmap_runs.py"}
+        "test_e2e_scenarios.py", "test_fuzz.py", "test_golden_runs.py", "test_policies.py", "test_linkmap_runs.py",
+        "test_clearance_runs.py"}
 INTEROP = {"test_campaign_ray.py", "test_cli.py", "test_companion_cli.py", "test_console.py",
            "test_interop_mavproxy.py", "test_interop_mavsdk.py", "test_interop_pymavlink.py", "test_map.py",
            "test_param_file.py", "test_proxy_serve.py", "test_signing_cli.py", "test_signing_interop.py",

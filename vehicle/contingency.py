@@ -98,10 +98,12 @@ class ReturnDriver:
                 resume = None
                 if self.way is not None and self.way_chain == cur.chain:
                     resume = self.way.resumed((x, y), self.way.length)
-                step = start_block(cur.block, x, y, t, trail, v.params, link_lost, outbound_speed, linkmap, resume)
+                step = start_block(cur.block, x, y, t, trail, v.params, link_lost, outbound_speed, linkmap, resume,
+                                   free=v.control.free)
             else:
                 step = step_block(self.service, x, y, yaw, t, trail, v.params, link_lost, outbound_speed,
-                                  slipping=estimator.slipping, linkmap=linkmap, regaining=book.link.regaining(t))
+                                  slipping=estimator.slipping, linkmap=linkmap, regaining=book.link.regaining(t),
+                                  free=v.control.free)
         except Exception as e:  # noqa: BLE001 - the return runs when nobody can restart the vehicle
             return self._fault(cur.index, e, t)
         if fresh:

@@ -14,6 +14,7 @@ import math
 from collections import deque
 from typing import TYPE_CHECKING
 
+from vehicle.clearance import FreeSpace
 from vehicle.contingency import ReturnDriver
 from vehicle.estimator import Estimator
 from vehicle.io import Readings
@@ -40,6 +41,7 @@ class ControlLoop:
         self.estimator = Estimator(x, y, yaw, t, pos_std=0.3, yaw_std=0.02)
         self.trail = Trail(TrailConfig.from_params(vehicle.params))
         self.linkmap = LinkMap(MapConfig.from_params(vehicle.params))  # the owner's link over space
+        self.free = FreeSpace()  # what the range sensor saw free: the corners a return may cut
         self.readings: Readings | None = None
         self._crumbs: deque[Crumb] = deque()  # recorded, waiting for their link tag to be final
         self.last_fix: tuple[float, float] | None = None  # the last fix used, for GPS_RAW_INT
@@ -68,6 +70,8 @@ class ControlLoop:
             self.last_fix, self.last_fix_t = (fix.x, fix.y), t
         p = est.pose
         self.linkmap.at(t, p.x, p.y)
+        if r.scan is not None:
+            self.free.scan(p.x, p.y, p.yaw, r.scan)
         book = v.book
         good = self.link_is_good = v.link_good(t)
         if v.contingency is not None:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vehicle.clearance import FreeSpace, shortcut
 from vehicle.linkmap import LinkMap
 from vehicle.trail import Trail
 
@@ -241,7 +242,8 @@ def truncate(route: np.ndarray, center: tuple[float, float], radius: float) -> t
 
 def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_displacement: float,
                link_lost: bool, heading: float = 0.0, overshoot: float = 0.0, linkmap: LinkMap | None = None,
-               resume: Way | None = None, map_depth: float = 0.0, map_seek: float = 0.0) -> Route:
+               resume: Way | None = None, map_depth: float = 0.0, map_seek: float = 0.0,
+               free: FreeSpace | None = None, clearance: float = 0.0) -> Route:
     """The whole planning step: target, retraced route, displacement bound.
 
     The way back is the trail retraced from ``start`` to its first crumb (loops pruned), or ``resume``, the way an
@@ -308,6 +310,8 @@ def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_dis
     keep = np.ones(len(full), dtype=bool)
     keep[1:] = np.hypot(*np.diff(full, axis=0).T) > 1e-9
     full, speeds = full[keep], speeds[: len(keep)][keep]
+    # the corners the range sensor saw clear are cut (vehicle/clearance.py); the way itself stays the crumbs
+    full, speeds = shortcut(full, speeds, free, clearance)
     pts, cut = truncate(full, start, max_displacement)
     return Route(pts, (gx, gy), goal if goal >= 0 else -1, cut, speeds[: len(pts)], onward, way, by_map)
 

@@ -24,6 +24,7 @@ from link.plan_items import (  # the MAV_CMD numbers of the items a plan may hol
     NAV_WAYPOINT,
     check_fields,
 )
+from vehicle.clearance import FreeSpace
 from vehicle.lease import ExpireReason, ServiceBlock
 from vehicle.linkmap import LinkMap
 from vehicle.navigation import FollowerConfig, Path, follow
@@ -123,16 +124,18 @@ STUCK_AFTER = 15.0  # s without getting closer to the end of the route
 
 
 def start(block: ServiceBlock, x: float, y: float, t: float, trail: Trail, params: Params, link_lost: bool,
-          outbound_speed: float, linkmap: LinkMap | None = None, resume: Way | None = None) -> ServiceStep:
+          outbound_speed: float, linkmap: LinkMap | None = None, resume: Way | None = None,
+          free: FreeSpace | None = None) -> ServiceStep:
     """Start a block. ``linkmap``: where the link reliably held (targets, docs/architecture.md §6); ``resume``: the
     way back the previous block of this chain was on, which a RETURN_TO_LINK with the link still lost picks up."""
     items: tuple[PlanItem, ...] = block.payload
     st = ServiceState(items, -1, t, t, (x, y), None, None, 0.0, 0.0, 0.0, math.inf, t)
-    return _next_item(st, x, y, t, trail, params, link_lost, outbound_speed, linkmap, resume)
+    return _next_item(st, x, y, t, trail, params, link_lost, outbound_speed, linkmap, resume, free)
 
 
 def _next_item(st: ServiceState, x: float, y: float, t: float, trail: Trail, params: Params, link_lost: bool,
-               outbound_speed: float, linkmap: LinkMap | None = None, resume: Way | None = None) -> ServiceStep:
+               outbound_speed: float, linkmap: LinkMap | None = None, resume: Way | None = None,
+               free: FreeSpace | None = None) -> ServiceStep:
     k = st.item + 1
     if k >= len(st.items):
         return ServiceStep(st, 0.0, 0.0, ExpireReason.COMPLETED)
@@ -154,11 +157,13 @@ def _next_item(st: ServiceState, x: float, y: float, t: float, trail: Trail, par
         depth = params["RTL_ARRIVE_R"] + 0.5 * params["LNK_MAP_CELL"]
         route = plan_route(trail, (x, y), target, remaining, link_lost, heading=math.radians(it.x),
                            overshoot=overshoot, linkmap=linkmap, resume=resume if link_lost else None,
-                           map_depth=depth, map_seek=params["LNK_MAP_SEEK"])
+                           map_depth=depth, map_seek=params["LNK_MAP_SEEK"], free=free,
+                           clearance=params["RTL_CUT_CLR"])
         if target is not Target.HEADING:
             route = _bounded_from(route, st.start, max_disp)
     elif it.command == NAV_RETURN_TO_LAUNCH:
-        route = plan_route(trail, (x, y), Target.ORIGIN, math.inf, link_lost)
+        route = plan_route(trail, (x, y), Target.ORIGIN, math.inf, link_lost, free=free,
+                           clearance=params["RTL_CUT_CLR"])
         max_disp = math.inf
     elif it.command == NAV_WAYPOINT:
         route = Route(np.array([[x, y], [it.x, it.y]]), (it.x, it.y), -1, False)
@@ -215,7 +220,7 @@ def _bounded_from(route: Route, center: tuple[float, float], radius: float) -> R
 
 def step(st: ServiceState, x: float, y: float, yaw: float, t: float, trail: Trail, params: Params,
          link_lost: bool, outbound_speed: float, slipping: bool = False,
-         linkmap: LinkMap | None = None, regaining: bool = False) -> ServiceStep:
+         linkmap: LinkMap | None = None, regaining: bool = False, free: FreeSpace | None = None) -> ServiceStep:
     """One control tick of the current block. ``slipping``: the estimator finds the odometry inconsistent (wheels
     spinning against a wall), so the estimated progress is not real and the block ends STUCK rather than
     "arriving" at a target it never reached. ``regaining``: the link is lost but the owner is heard well again
@@ -228,10 +233,10 @@ def step(st: ServiceState, x: float, y: float, yaw: float, t: float, trail: Trai
         return ServiceStep(st, 0.0, 0.0, ExpireReason.STUCK)
     if it.command == NAV_LOITER_TIME:
         if t - st.item_started_at >= it.param1:
-            return _next_item(st, x, y, t, trail, params, link_lost, outbound_speed, linkmap)
+            return _next_item(st, x, y, t, trail, params, link_lost, outbound_speed, linkmap, free=free)
         return ServiceStep(st, 0.0, 0.0)
     if st.path is None:
-        return _next_item(st, x, y, t, trail, params, link_lost, outbound_speed, linkmap)
+        return _next_item(st, x, y, t, trail, params, link_lost, outbound_speed, linkmap, free=free)
     if st.onward and not link_lost:
         # past a dead-zone target only for want of the link: it is back (a block that continues on regain)
         return ServiceStep(st, 0.0, 0.0, ExpireReason.COMPLETED)
@@ -251,7 +256,7 @@ def step(st: ServiceState, x: float, y: float, yaw: float, t: float, trail: Trai
             return ServiceStep(replace(onward, progress=go.progress, reverse=go.reverse), go.speed, go.yaw_rate,
                                replanned=True)
         return _next_item(replace(st, progress=cmd.progress), x, y, t, trail, params, link_lost, outbound_speed,
-                          linkmap)
+                          linkmap, free=free)
     if cmd.remaining < st.best_remaining - 0.2:
         st = replace(st, best_remaining=cmd.remaining, last_progress_at=t)
     elif t - st.last_progress_at >= STUCK_AFTER:
