@@ -103,6 +103,8 @@ def test_bad_scans_are_skipped_not_trusted():
     free.scan(0.0, 0.0, 0.0, Scan(BEARINGS, np.full(90, 3.0), -1.0))
     free.scan(0.0, 0.0, 0.0, Scan(BEARINGS, np.full(90, 3.0), math.inf))
     free.scan(1e12, 0.0, 0.0, Scan(BEARINGS, np.full(90, 3.0), REACH))
+    free.scan(0.0, 0.0, 0.0, Scan(BEARINGS, ["far"] * 90, REACH))  # a driver's garbage: dropped, not raised
+    free.scan(0.0, 0.0, 0.0, Scan(BEARINGS, np.full(90, 3.0), None))
     assert free.cells == 0 and free.scans == 0
     # a NaN range or bearing drops that beam only
     r = np.full(90, 3.0)

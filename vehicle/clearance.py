@@ -84,9 +84,12 @@ class FreeSpace:
             return
         if abs(x) > _MAX_COORD or abs(y) > _MAX_COORD:
             return
-        bearings = np.asarray(scan.bearings, dtype=float)
-        ranges = np.asarray(scan.ranges, dtype=float)
-        reach = float(scan.max_range)
+        try:  # a driver's scan is input: what is not numbers is dropped here, never raised into the tick
+            bearings = np.asarray(scan.bearings, dtype=float)
+            ranges = np.asarray(scan.ranges, dtype=float)
+            reach = float(scan.max_range)
+        except (TypeError, ValueError):
+            return
         if bearings.shape != ranges.shape or bearings.ndim != 1 or not (0.0 < reach <= MAX_RANGE):
             return
         ok = np.isfinite(bearings) & ~np.isnan(ranges) & (ranges >= 0.0)
