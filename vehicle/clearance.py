@@ -40,6 +40,12 @@ FREE, OCCUPIED = 1, 2  # a cell's bits; 0 is unseen. Clear means seen free and n
 _MAX_COORD = (SPAN // 2 - 1) * CELL  # a position beyond this is not in the grid (estimator glitch): not mapped
 
 
+def _tiles(ix: np.ndarray, iy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cell indices -> (the key of each cell's tile, its row and column within the tile)."""
+    keys = ((ix >> TILE_BITS) + SPAN // 2) * SPAN + ((iy >> TILE_BITS) + SPAN // 2)
+    return keys, ix & (TILE - 1), iy & (TILE - 1)
+
+
 def _widest_gap(bearings: np.ndarray) -> float:
     """The widest angle between neighbouring beams of a sweep (round the circle: a sweep's ends are neighbours)."""
     b = np.sort(np.mod(bearings, 2.0 * math.pi))
@@ -50,8 +56,9 @@ def _widest_gap(bearings: np.ndarray) -> float:
 class FreeSpace:
     """Cells seen free or occupied by the range sensor, in tiles of TILE x TILE cells; a cell of no tile is unseen.
 
-    Tiles rather than a cell per dict entry: a sweep books several hundred cells, and setting them in a dense array
-    by numpy indexing costs a few microseconds where a dict entry per cell cost a quarter of the control tick."""
+    Tiles rather than a cell per dict entry: a sweep books several hundred cells, and numpy sets them in a dense
+    array in one indexing step each, where a dict took a Python call per cell (measured on the 10-minute tunnel
+    bench: 56.0 us a tick with tiles, 58.3 with a dict entry per cell, 45.9 without the sensor)."""
 
     def __init__(self, max_cells: int = MAX_CELLS) -> None:
         self.tiles: dict[int, np.ndarray] = {}
@@ -119,8 +126,7 @@ class FreeSpace:
     def _book(self, ix: np.ndarray, iy: np.ndarray, bit: int) -> None:
         if len(ix) == 0:
             return
-        keys = ((ix >> TILE_BITS) + SPAN // 2) * SPAN + ((iy >> TILE_BITS) + SPAN // 2)
-        lx, ly = ix & (TILE - 1), iy & (TILE - 1)
+        keys, lx, ly = _tiles(ix, iy)
         first = int(keys[0])
         groups = [first] if bool((keys == first).all()) else np.unique(keys).tolist()
         tiles = self.tiles
@@ -148,9 +154,7 @@ class FreeSpace:
         L2 = dx * dx + dy * dy
         u = np.clip(((cx - ax) * dx + (cy - ay) * dy) / L2, 0.0, 1.0) if L2 > 1e-18 else np.zeros_like(cx)
         near = np.hypot(cx - (ax + u * dx), cy - (ay + u * dy)) <= r
-        ix, iy = ix[near], iy[near]
-        keys = ((ix >> TILE_BITS) + SPAN // 2) * SPAN + ((iy >> TILE_BITS) + SPAN // 2)
-        lx, ly = ix & (TILE - 1), iy & (TILE - 1)
+        keys, lx, ly = _tiles(ix[near], iy[near])
         for k in np.unique(keys).tolist():
             tile = self.tiles.get(k)
             if tile is None:
