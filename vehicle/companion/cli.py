@@ -1,12 +1,18 @@
 """``returnlink companion``: the companion on a real computer, between an autopilot's telemetry port and a radio.
 
-The imperative shell around ``vehicle.companion.app.Companion``: it opens the two connections, checks that an
-ArduPilot Rover answers on the autopilot's, runs the 50 Hz loop on the wall clock and serves both links between
+The imperative shell around ``vehicle.companion.app.Companion``: it opens the connections, checks that an
+ArduPilot Rover answers on the autopilot's, runs the 50 Hz loop on the wall clock and serves every link between
 ticks. ``--check`` and ``--configure`` talk to the autopilot about its parameters and leave.
 
-Anything wrong at start (a connection string, a file, an autopilot that cannot be reached or is not a Rover) is
-reported by name with exit code 2 before the loop starts. Once running, nothing on either link ends the process:
-a lost autopilot is reported and retried.
+``--gcs`` may be given several times (the telemetry radio and a network, docs/architecture.md §11.1): whatever goes
+to the ground goes to every ground link, and what comes from any of them reaches the companion tagged with its link
+and address (``GroundSource``), so the owner, a system id, is heard on whichever carries it. ``--log DIR`` records
+every frame both ways in a telemetry log (``vehicle.companion.tlog``).
+
+Anything wrong at start (a connection string, a file, a log directory, an autopilot that cannot be reached or is
+not a Rover) is reported by name with exit code 2 before the loop starts. Once running, nothing on any link ends
+the process: a lost autopilot is reported and retried, a ground link that fails to write is reported while the
+others carry on, a log that cannot be written any more is reported and stops.
 """
 
 from __future__ import annotations
@@ -17,17 +23,22 @@ import select
 import signal
 import sys
 import time
+from collections.abc import Hashable
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, NamedTuple
 
 from link import args as types
 from vehicle.app import DT
 from vehicle.companion.app import Companion
-from vehicle.companion.links import ConnError, parse_conn
+from vehicle.companion.links import Conn, ConnError, Framer, open_link, parse_conn, require_device
 from vehicle.companion.setup import check, differing, report
+from vehicle.companion.tlog import FROM_AUTOPILOT, FROM_GROUND, TO_AUTOPILOT, TO_GROUND, Tlog, TlogError
 
 START_WAIT = 15.0  # s to reach the autopilot and hear its heartbeat
 PARAM_WAIT = 3.0  # s to wait for the autopilot's parameters
 PARAM_RETRY = 1.0
+REPORT_EVERY = 10.0  # s between reports of the same ground link failing
 
 
 def add_parser(sub) -> None:
@@ -35,7 +46,11 @@ def add_parser(sub) -> None:
                                          "and the ground-station radio (docs/architecture.md §11)")
     c.add_argument("--autopilot", required=True, metavar="CONN",
                    help="the autopilot: serial:/dev/ttyAMA0:921600, tcp:HOST:PORT, udpin:HOST:PORT, udpout:HOST:PORT")
-    c.add_argument("--gcs", metavar="CONN", help="the ground side (the radio or a ground station), same forms")
+    c.add_argument("--gcs", metavar="CONN", action="append",
+                   help="a ground link (the radio or a ground station), same forms; give it again for more links "
+                        "(e.g. the radio and the local network): the ground side is all of them")
+    c.add_argument("--log", metavar="DIR", help="record every frame both ways in DIR/<UTC start time>.tlog "
+                                                "(MAVProxy, mavlogdump and QGC read it)")
     c.add_argument("--params", help="the companion's returnlink parameters (.parm) to boot from and save to")
     c.add_argument("--key", help="signing key file (returnlink keys new): sign the ground side, obey only signed "
                                  "frames; its timestamp is kept in FILE.stamp")
@@ -55,38 +70,94 @@ def fail(message: str) -> int:
     return 2
 
 
-class CompanionLoop:
-    """The two links and the companion, served on the wall clock."""
+class GroundSource(NamedTuple):
+    """Where a ground frame came from: which ``--gcs`` link (its index) and, on UDP, which address."""
 
-    def __init__(self, autopilot, companion_factory) -> None:
+    link: int
+    addr: Hashable | None
+
+
+@dataclass
+class Ground:
+    """One ground link, the framer that hands its bytes over in whole frames, and its failures reported so far."""
+
+    index: int
+    link: Any  # links.TcpLink | UdpLink | SerialLink, or a test's stand-in
+    text: str
+    framer: Framer = field(default_factory=Framer)
+    reported: int = 0
+    next_report: float = 0.0
+
+
+class CompanionLoop:
+    """The autopilot's link, the ground links and the companion, served on the wall clock; every frame through the
+    log if there is one."""
+
+    def __init__(self, autopilot, companion_factory, log: Tlog | None = None) -> None:
         self.ap = autopilot
-        self.gcs = None
+        self.grounds: list[Ground] = []
+        self.log = log
+        self.log_reported = False
         self.t0 = time.monotonic()
-        self.companion: Companion = companion_factory(self.ap.write, self._to_ground)
+        self.companion: Companion = companion_factory(self._to_autopilot, self._to_ground)
         self.next_tick = self.t0
 
+    def add_ground(self, link, text: str, datagrams: bool = False) -> None:
+        """Serve ``link`` as one more ground link (``datagrams``: UDP, each read whole in itself)."""
+        self.grounds.append(Ground(len(self.grounds), link, text, Framer(stream=not datagrams)))
+
+    def open_ground(self, conn: Conn) -> None:
+        """Open ``conn`` as the next ground link; a UDP one keeps the addresses the companion pins on it."""
+        i = len(self.grounds)
+
+        def pinned() -> list[Hashable]:
+            return [s.addr for s in self.companion.pinned()
+                    if isinstance(s, GroundSource) and s.link == i and s.addr is not None]
+
+        self.add_ground(open_link(conn, pinned=pinned), conn.text, datagrams=conn.kind in ("udpin", "udpout"))
+
+    def _to_autopilot(self, data: bytes) -> None:
+        if self.log is not None:
+            self.log.write(TO_AUTOPILOT, data)
+        self.ap.write(data)
+
     def _to_ground(self, data: bytes) -> None:
-        if self.gcs is not None:
-            self.gcs.write(data)
+        """To every ground link; one that fails (unplugged, unreachable) is counted and reported, never fatal."""
+        if self.log is not None:
+            self.log.write(TO_GROUND, data)
+        for g in self.grounds:
+            try:
+                g.link.write(data)
+            except Exception as e:  # noqa: BLE001 - the links count their own OSErrors; anything else as well
+                g.link.errors = getattr(g.link, "errors", 0) + 1
+                g.link.last_error = f"{type(e).__name__}: {e}"
 
     def now(self) -> float:
         return time.monotonic() - self.t0
 
     def step(self) -> None:
         """Wait for input until the next tick is due, take it, and tick when due."""
-        links = [x for x in (self.ap, self.gcs) if x is not None]
+        links = [self.ap, *(g.link for g in self.grounds)]
         fds = [fd for fd in (x.fileno() for x in links) if fd is not None]
         timeout = max(0.0, self.next_tick - time.monotonic())
         try:
             select.select(fds, [], [], timeout)
         except (OSError, ValueError):  # a link closed under us: it reconnects on poll
             time.sleep(timeout)
-        c = self.companion
+        c, log = self.companion, self.log
         for data, _ in self.ap.read():
+            if log is not None:
+                log.write(FROM_AUTOPILOT, data)
             c.from_autopilot(data, self.now())
-        if self.gcs is not None:
-            for data, source in self.gcs.read():
-                c.from_ground(data, self.now(), source)
+        for g in self.grounds:
+            for data, addr in g.link.read():
+                pieces = g.framer.feed(data)  # whole frames only: the links share the companion's parser
+                if not pieces:
+                    continue
+                whole = b"".join(pieces)
+                if log is not None:
+                    log.write(FROM_GROUND, whole)
+                c.from_ground(whole, self.now(), GroundSource(g.index, addr))
         now = time.monotonic()
         if now >= self.next_tick:
             c.tick(now - self.t0)
@@ -95,6 +166,34 @@ class CompanionLoop:
                 self.next_tick = now + DT
         for x in links:
             x.poll()
+        if self.log is not None:
+            self.log.flush_if_due()
+        self._report(now)
+
+    def _report(self, now: float) -> None:
+        """Say (stderr and STATUSTEXT) that a ground link fails, at most every REPORT_EVERY s per link, and that
+        the log stopped, once."""
+        for g in self.grounds:
+            errors = getattr(g.link, "errors", 0)
+            if errors > g.reported and now >= g.next_report:
+                g.reported, g.next_report = errors, now + REPORT_EVERY
+                self._say(f"ground link {g.text}", f"ground link {g.text} failing ({errors} errors, last: "
+                          f"{g.link.last_error}); the other links carry on")
+        if self.log is not None and self.log.failed is not None and not self.log_reported:
+            self.log_reported = True
+            self._say("log", self.log.failed)
+
+    def _say(self, topic: str, text: str) -> None:
+        print(f"returnlink: warning: {text}", file=sys.stderr, flush=True)
+        c = self.companion
+        c.notice(0, topic, text, c.t)
+
+    def close(self) -> None:
+        """Every link, and the log (flushed)."""
+        for x in [self.ap, *(g.link for g in self.grounds)]:
+            x.close()
+        if self.log is not None:
+            self.log.close()
 
     def run_for(self, seconds: float, done=lambda: False) -> bool:
         """Serve until ``done()`` or ``seconds`` pass; whether ``done()`` came true."""
@@ -133,8 +232,6 @@ class CompanionLoop:
 def _connect(conn, wait: float):
     """Open the autopilot's link, retrying a refused TCP connection until ``wait`` s pass (SITL or a booting
     autopilot may not listen yet). ConnError naming the connection when it cannot be opened."""
-    from vehicle.companion.links import open_link
-
     end = time.monotonic() + wait
     while True:
         try:
@@ -161,11 +258,13 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         ap_conn = parse_conn(args.autopilot)
-        gcs_conn = parse_conn(args.gcs) if args.gcs else None
+        gcs_conns = [parse_conn(text) for text in args.gcs or []]
+        for conn in gcs_conns:
+            require_device(conn)
     except ConnError as e:
         return fail(str(e))
     config_only = args.check or args.configure
-    if gcs_conn is None and not config_only:
+    if not gcs_conns and not config_only:
         return fail("--gcs CONN is needed (the ground side), unless --check or --configure")
     param_file = Path(args.params) if args.params else None
     try:
@@ -179,8 +278,14 @@ def run(args: argparse.Namespace) -> int:
     except OSError as e:
         return fail(f"cannot prepare the companion's files: {e}")
     try:
+        log = Tlog.create(Path(args.log)) if args.log else None  # before anything connects: its frames are in it
+    except TlogError as e:
+        return fail(str(e))
+    try:
         ap = _connect(ap_conn, args.wait)
     except ConnError as e:
+        if log is not None:
+            log.close()
         return fail(str(e))
 
     def build(to_autopilot, to_ground) -> Companion:
@@ -188,29 +293,32 @@ def run(args: argparse.Namespace) -> int:
                          stamp=lambda t: stamp_from_unix(time.time()), boot_epoch=epochs.boot,
                          param_file=param_file, on_epoch=epochs.issued, autopilot_name=ap_conn.text)
 
-    shell = CompanionLoop(ap, build)
+    shell = CompanionLoop(ap, build, log)
+    try:
+        return _serve(shell, args, ap_conn, gcs_conns, keystore)
+    finally:
+        shell.close()
+
+
+def _serve(shell: CompanionLoop, args: argparse.Namespace, ap_conn: Conn, gcs_conns: list[Conn], keystore) -> int:
+    """From the autopilot's link open to the end: its heartbeat, ``--check``/``--configure``, or the ground links
+    and the loop until SIGTERM or ^C. The caller closes every link and the log."""
     c = shell.companion
     heard = shell.run_for(args.wait, lambda: c.driver.seen.sysid is not None and c.driver.seen.mode is not None)
     if not heard:
-        ap.close()
         return fail(f"no autopilot heartbeat on {ap_conn.text} within {args.wait:g} s")
     if c.identity_problem:
-        ap.close()
         return fail(f"{ap_conn.text}: {c.identity_problem}; companion mode drives ArduPilot Rover only")
-    if config_only:
-        code = _configure(shell, args.configure)
-        ap.close()
-        return code
-    try:
-        from vehicle.companion.links import open_link
-
-        shell.gcs = open_link(gcs_conn, pinned=c.pinned)
-    except (ConnError, OSError) as e:
-        ap.close()
-        return fail(str(e) if isinstance(e, ConnError) else f"cannot reach {gcs_conn.text}: {e}")
-    _announce(shell, ap_conn.text, gcs_conn.text, keystore)
+    if args.check or args.configure:
+        return _configure(shell, args.configure)
     stop = []
-    signal.signal(signal.SIGTERM, lambda *_: stop.append(True))
+    signal.signal(signal.SIGTERM, lambda *_: stop.append(True))  # (from here on a stop closes the log cleanly)
+    for conn in gcs_conns:
+        try:
+            shell.open_ground(conn)
+        except (ConnError, OSError) as e:
+            return fail(str(e) if isinstance(e, ConnError) else f"cannot reach {conn.text}: {e}")
+    _announce(shell, ap_conn.text, " and ".join(conn.text for conn in gcs_conns), keystore)
     try:
         while not stop:
             shell.step()
@@ -218,8 +326,6 @@ def run(args: argparse.Namespace) -> int:
         pass
     finally:
         c.close()
-        ap.close()
-        shell.gcs.close()
     return 0
 
 

@@ -1,10 +1,15 @@
-"""The two connections named on the command line (docs/architecture.md §11 CONN): serial, TCP client, UDP in and
-UDP out.
+"""The connections named on the command line (docs/architecture.md §11 CONN): serial, TCP client, UDP in and
+UDP out; one to the autopilot and one or more to the ground (§11.1).
 
 ``parse_conn`` checks a connection string before anything opens (a bad one is a usage error, exit 2); ``open_link``
 opens it. A link moves bytes and nothing else: ``read()`` gives what arrived (with where from), ``write`` sends,
 ``fileno`` lets the loop wait on it. A TCP link that drops reconnects by itself on ``poll``, as the autopilot's
-serial port or SITL may come back.
+serial port or SITL may come back. A link never raises on a failed write: it counts it (``errors``,
+``last_error``) so the loop can report it while the other links carry on.
+
+``Framer`` cuts a byte stream into MAVLink frames: several ground links feed one parser in the companion, and a
+serial read may end mid-frame, so each link's bytes are handed over in whole frames; the telemetry log is per frame
+too.
 """
 
 from __future__ import annotations
@@ -27,6 +32,17 @@ RECONNECT_EVERY = 1.0  # s between attempts on a TCP link that dropped
 
 class ConnError(ValueError):
     """A connection string that cannot be a connection, or one that cannot be opened."""
+
+
+class Counted:
+    """Failures of a link, counted rather than raised: one broken ground link must not stop the others."""
+
+    errors = 0
+    last_error = ""
+
+    def _failed(self, e: OSError) -> None:
+        self.errors += 1
+        self.last_error = e.strerror or str(e)
 
 
 @dataclass(frozen=True)
@@ -62,7 +78,14 @@ def parse_conn(text: str) -> Conn:
     return Conn(text, kind, host=host or "0.0.0.0", port=int(port))
 
 
-class TcpLink:
+def require_device(conn: Conn) -> None:
+    """ConnError naming ``conn`` if it is a serial device that does not exist: checked with the command line, before
+    anything connects, so a mistyped radio is not found only after the autopilot's wait."""
+    if conn.kind == "serial" and not os.path.exists(conn.device):
+        raise ConnError(f"cannot open {conn.text}: no such device {conn.device}")
+
+
+class TcpLink(Counted):
     """A TCP client (SITL's SERIALn, a telemetry bridge); reconnects on ``poll`` after a drop."""
 
     def __init__(self, conn: Conn, timeout: float = 5.0) -> None:
@@ -108,7 +131,8 @@ class TcpLink:
             self.sock.sendall(data)
         except (BlockingIOError, InterruptedError):
             pass  # the far end is not reading: telemetry is dropped rather than queued without bound
-        except OSError:
+        except OSError as e:
+            self._failed(e)
             self._drop()
 
     def _drop(self) -> None:
@@ -132,7 +156,7 @@ class TcpLink:
             self.sock = None
 
 
-class UdpLink:
+class UdpLink(Counted):
     """UDP: ``udpin`` listens and answers whoever talked to it; ``udpout`` sends to one address first."""
 
     def __init__(self, conn: Conn, pinned=None) -> None:
@@ -153,7 +177,17 @@ class UdpLink:
         return list(self.transport.receive())
 
     def write(self, data: bytes) -> None:
-        self.transport.send(data)
+        """To every peer, as ``UdpTransport.send``, but a failure (network down, no route) is counted, not hidden:
+        nobody listening yet (refused) and a full socket buffer are UDP telemetry's normal losses."""
+        tr = self.transport
+        pinned = list(tr.pinned()) if tr.pinned is not None else []
+        for addr in dict.fromkeys([*tr.fixed, *tr.learned, *pinned]):
+            try:
+                tr.sock.sendto(data, addr)
+            except (ConnectionRefusedError, BlockingIOError, InterruptedError):
+                pass
+            except OSError as e:
+                self._failed(e)
 
     def poll(self) -> None:
         pass
@@ -162,7 +196,7 @@ class UdpLink:
         self.transport.close()
 
 
-class SerialLink:
+class SerialLink(Counted):
     """A serial port in raw mode (the autopilot's TELEM port, or the radio's)."""
 
     def __init__(self, conn: Conn) -> None:
@@ -204,6 +238,7 @@ class SerialLink:
         except OSError as e:
             if e.errno in (errno.EAGAIN, errno.EINTR):
                 return []
+            self._failed(e)
             self._drop()  # unplugged: the loop reports the silence, ``poll`` opens it again when it is back
             return []
         return [(data, None)] if data else []
@@ -223,7 +258,8 @@ class SerialLink:
             os.write(self.fd, data)
         except BlockingIOError:
             pass  # the port's buffer is full: dropped rather than queued without bound
-        except OSError:
+        except OSError as e:
+            self._failed(e)
             self._drop()
 
     def poll(self) -> None:
@@ -249,3 +285,49 @@ def open_link(conn: Conn, pinned=None, timeout: float = 5.0) -> TcpLink | UdpLin
     if conn.kind == "serial":
         return SerialLink(conn)
     return UdpLink(conn, pinned)
+
+
+MAGIC_V1, MAGIC_V2 = 0xFE, 0xFD
+
+
+class Framer:
+    """Cuts bytes into MAVLink frames by their headers alone (length, signed flag), as pymavlink's parser and
+    mavlogdump frame them, so what it cuts they read back frame for frame; no CRC (the dialect's CRC extras are the
+    parser's business, and a frame with a bad one is still what was on the wire).
+
+    ``feed`` returns whole frames and runs of bytes that are no frame (line noise, kept so the companion still
+    counts them), in order. A stream (serial, TCP) keeps an incomplete frame for the next read; a datagram link
+    drops it, since the next datagram (maybe from someone else) never completes it."""
+
+    def __init__(self, stream: bool = True) -> None:
+        self.stream = stream
+        self.buf = bytearray()
+
+    def feed(self, data: bytes) -> list[bytes]:
+        buf = self.buf
+        buf += data
+        out: list[bytes] = []
+        i, n = 0, len(buf)
+        while i < n:
+            if buf[i] not in (MAGIC_V1, MAGIC_V2):
+                j = min((k for k in (buf.find(MAGIC_V1, i), buf.find(MAGIC_V2, i)) if k >= 0), default=n)
+                out.append(bytes(buf[i:j]))
+                i = j
+                continue
+            if n - i < 3:
+                break
+            size = buf[i + 1] + (8 if buf[i] == MAGIC_V1 else 12 + (13 if buf[i + 2] & 1 else 0))
+            if n - i < size:
+                break
+            out.append(bytes(buf[i:i + size]))
+            i += size
+        if self.stream:
+            del buf[:i]
+        else:
+            buf.clear()
+        return out
+
+
+def is_frame(piece: bytes) -> bool:
+    """Whether a piece ``Framer.feed`` returned is a frame (not a run of noise)."""
+    return bool(piece) and piece[0] in (MAGIC_V1, MAGIC_V2)
