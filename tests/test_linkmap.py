@@ -198,3 +198,24 @@ def test_the_map_pages_link_layer_is_made_from_the_csv_bytes():
     assert lay["cells"] == [[1.0, 1.0, 1.0, 7], [3.0, 1.0, 0.1, 5], [5.0, 1.0, None, 0]]
     bad = layer(b"north,east\n1,2\n")
     assert bad["cells"] == [] and "line 1" in bad["error"]
+
+
+def test_a_fast_straight_drive_leaves_the_map_vouching_near_where_the_link_was_lost_not_far_back():
+    # issue 28: at 2 m/s a 2 m cell is crossed in a second, two looks, one short of LNK_MAP_OBS; judged alone no
+    # cell on the drive was reliable and the return drove back to where the robot had dawdled near home
+    m = LinkMap(MapConfig(cell=2.0))
+    t, seq = drive(m, 0.0, 10.0, 0.5, 0.5, lambda t, x: True)  # waiting at home: a well known place
+    t, seq = drive(m, t, t + 15.0, 0.5, 30.5, lambda t, x: x < 25.0, seq0=seq)  # heard up to 25 m
+    fast = [c for c in m.cells() if 4.0 < c.north < 24.0]
+    assert fast and all(c.observations < 3 for c in fast)
+    route = np.array([[30.0, 0.0], [0.0, 0.0]])  # the way back
+    k, u = m.first_reliable(route, skip=30.0 - 25.0)
+    x = 30.0 - u * 30.0
+    assert 18.0 <= x < 25.0, f"the map vouches first for {x:.1f} m"
+    assert not m.reliable(25.5, 0.0) and not m.reliable(27.0, 0.0)  # the fringe and beyond never
+
+
+def test_a_short_look_is_judged_with_its_neighbours_and_a_dead_one_drags_it_down():
+    m = LinkMap(MapConfig(cell=2.0))
+    t, seq = drive(m, 0.0, 3.0, 0.5, 6.5, lambda t, x: x < 4.0)  # 2 m/s: good, good, then dead at 4 m
+    assert not m.reliable(3.0, 0.0)  # beside the dead cell: the pooled bound is low

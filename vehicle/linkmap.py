@@ -250,17 +250,35 @@ class LinkMap:
 
     def reliable(self, x: float, y: float) -> bool:
         """Whether the map says the link reliably holds at (x, y): enough observations and a lower confidence
-        bound on delivery above LNK_MIN_Q + LNK_MAP_MARGIN."""
-        c = self._cells.get(self.key(x, y))
+        bound on delivery above LNK_MIN_Q + LNK_MAP_MARGIN (``_holds``)."""
+        return self._holds(self.key(x, y))
+
+    def _holds(self, key: tuple[int, int]) -> bool:
+        """A cell looked at for LNK_MAP_OBS observations is judged alone. A cell crossed too fast for that (at
+        2 m/s a 2 m cell is one second: two looks) is judged with the cells around it that the robot also
+        crossed: a place is known by its neighbourhood, and a straight drive at speed must not leave the map
+        vouching only for where the robot dawdled far back (issue 28: a companion's return drove 15 m past where
+        the owner was last heard, to the one cell near home with enough looks). The pooled bound still counts
+        every packet lost next door, so the fringe of coverage, whose neighbours beyond are dead, stays
+        unreliable; a cell whose own looks saw the link fail never holds."""
+        c = self._cells.get(key)
         cfg = self.config
-        return (c is not None and c.observations >= cfg.min_obs
-                and wilson_lower(c.delivered, c.expected) > cfg.threshold)
+        if c is None or c.expected <= 0:
+            return False
+        if c.observations >= cfg.min_obs:
+            return wilson_lower(c.delivered, c.expected) > cfg.threshold
+        obs, expected, delivered = 0, 0.0, 0
+        i, j = key
+        for di in (-1, 0, 1):
+            for dj in (-1, 0, 1):
+                n = self._cells.get((i + di, j + dj))
+                if n is not None:
+                    obs, expected, delivered = obs + n.observations, expected + n.expected, delivered + n.delivered
+        return obs >= cfg.min_obs and wilson_lower(delivered, expected) > cfg.threshold
 
     def known(self) -> bool:
         """Whether any place is reliable (a map with none cannot disagree with anything)."""
-        cfg = self.config
-        return any(c.observations >= cfg.min_obs and wilson_lower(c.delivered, c.expected) > cfg.threshold
-                   for c in self._cells.values())
+        return any(self._holds(k) for k in self._cells)
 
     def poor(self, x: float, y: float) -> bool:
         """Whether the map has seen the link fail at (x, y): enough observations, and a delivery below the
