@@ -36,7 +36,10 @@ def summary(run, m: dict) -> str:
 
 def write_linkmap(run, path: Path) -> Path | None:
     """The vehicle's link map as ``linkmap.csv`` (``link.linkmap_format``), replaced atomically; None for a run
-    whose vehicle keeps no map (the firmware's)."""
+    whose vehicle keeps no map (the firmware's alone, or a companion that never booted). The map is in the vehicle's
+    local frame as it knows it: for the native vehicle the true frame (its estimator starts at its true pose), for
+    returnlink companion the autopilot's local frame, whose origin is the scenario's start (``run.frame_offset``
+    in the true frame)."""
     linkmap = getattr(getattr(run, "vehicle", None), "linkmap", None)
     if linkmap is None:
         return None
@@ -49,7 +52,7 @@ def write_linkmap(run, path: Path) -> Path | None:
 
 
 def write(run, out: Path, plots: bool = True) -> list[Path]:
-    """metrics.json, run.tlog, linkmap.csv (a native run) and (unless ``plots`` is off) trajectory.png and
+    """metrics.json, run.tlog, linkmap.csv (a native or companion run) and (unless ``plots`` is off) trajectory.png and
     timeline.png in ``out``."""
     import importlib
 

@@ -361,3 +361,50 @@ def test_the_companion_offers_its_link_map_over_ftp_on_191_and_the_autopilot_nev
     assert d.ok, d.error
     assert bytes(d.data).startswith(b"north,east,observations")
     assert not rig.ap.sent("FILE_TRANSFER_PROTOCOL")
+
+
+# ----- the dead-man over the owner's drive (LNK_HOLD_S) -----------------------------------------------------------
+def driving_north(params: Params | None = None):
+    """An owned companion whose owner drives the autopilot in GUIDED with a 2 m/s target stream at 10 Hz."""
+    rig, owner = owned(params=params)
+    rig.send_as(owner, lambda m: m.command_long_encode(1, 1, apm.MAV_CMD_DO_SET_MODE, 0, 1, GUIDED, 0, 0, 0, 0, 0))
+    assert rig.run(1, lambda: rig.ap.mode == GUIDED)
+    for _ in range(20):
+        rig.send_as(owner, lambda m: m.set_position_target_local_ned_encode(
+            0, 1, 1, apm.MAV_FRAME_BODY_NED, 0x05C7, 0, 0, 0, 2.0, 0, 0, 0, 0, 0, 0, 0))
+        rig.run(0.1)
+    assert rig.ap.speed == 2.0
+    return rig, owner
+
+
+def stops_from_191(rig: Rig, since: int) -> list:
+    return [m for m in rig.ap.sent("SET_POSITION_TARGET_LOCAL_NED", since)
+            if m.get_srcComponent() == 191 and m.vx == 0 and m.yaw_rate == 0]
+
+
+def test_the_owner_falling_silent_mid_drive_stops_the_autopilot_within_lnk_hold_s_not_lnk_timeout():
+    rig, owner = driving_north()
+    rig.deliver = lambda gs, t: gs is not owner
+    since, silent_at = len(rig.ap.received), rig.t
+    assert rig.run(2.0, lambda: bool(stops_from_191(rig, since)))
+    assert rig.t - silent_at <= 1.5 + 0.1  # LNK_HOLD_S, not the 3 s LNK_TIMEOUT nor the autopilot's own 3 s
+    assert rig.ap.speed == 0.0 and rig.ap.mode == GUIDED  # stopped, and still in GUIDED for the return
+    assert not rig.companion.vehicle.book.returning
+    assert rig.companion.counters["drive_held"] == 1
+    assert any("LNK_HOLD_S" in t for t in texts(rig))
+    assert rig.run(3, lambda: rig.companion.vehicle.book.returning)  # then the return, as before
+
+
+def test_lnk_hold_s_0_leaves_the_owners_last_target_to_the_autopilot():
+    rig, owner = driving_north(Params({"LNK_HOLD_S": 0.0}))
+    rig.deliver = lambda gs, t: gs is not owner
+    since = len(rig.ap.received)
+    rig.run(2.5)
+    assert not stops_from_191(rig, since) and rig.ap.speed == 2.0
+
+
+def test_an_owner_who_stops_sending_targets_but_keeps_its_heartbeat_is_not_stopped():
+    rig, owner = driving_north()
+    since = len(rig.ap.received)
+    rig.run(2.5)  # heartbeats only: the owner is there, it has just not moved its target
+    assert not stops_from_191(rig, since)

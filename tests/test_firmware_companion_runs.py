@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from gcs.station import mav
+from link.linkmap_format import decode
 from sim.campaign.spec import SpecError, load_spec, parse_spec
 from sim.cli import main
 from sim.firmware import companion_metrics
@@ -94,6 +95,19 @@ def test_the_companion_regains_the_link_by_its_return_and_rests_near_the_loss(cl
     assert any(name == "HOLD" and t >= m["link_regained_s"] - 0.1 for t, name in modes)
     assert "SMART_RTL" not in [name for _t, name in modes]  # the firmware's own failsafe never fired
     assert "the companion forwarded" in text and "firmware modes:" in text
+
+
+def test_the_companions_link_map_carries_the_radios_rssi(cli_run):
+    """The vehicle-side radio's RADIO_STATUS reaches the companion once a second (docs/architecture.md §11.1), so
+    its linkmap.csv has the owner's RSSI beside the delivery in most cells, in the autopilot's local frame."""
+    rc, text, out = cli_run
+    cells = decode((out / "linkmap.csv").read_bytes())
+    assert len(cells) > 10
+    with_rssi = [c for c in cells if math.isfinite(c.rssi_dbm)]
+    assert len(with_rssi) > 0.5 * len(cells), f"{len(with_rssi)} of {len(cells)} cells have rssi_dbm"
+    assert all(-127.0 <= c.rssi_dbm <= 7.0 for c in with_rssi)
+    # the local frame starts at the scenario's start: the adit runs north from about 0, the run reaches 30+ m in
+    assert min(c.north for c in cells) < 3.0 and max(c.north for c in cells) > 30.0
 
 
 @pytest.fixture(scope="module")

@@ -16,6 +16,7 @@ transport are passed in.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -42,6 +43,7 @@ from vehicle.lease import (
 from vehicle.lease_terms import State, refused
 from vehicle.linkmap import MapConfig
 from vehicle.params import Params
+from vehicle.radio_status import STALE_S as RSSI_STALE_S
 from vehicle.service import PlanItem, blocks_from_items, default_plan
 from vehicle.teleop import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, SETPOINT_TTL, Setpoint, velocity_to_command
 
@@ -93,6 +95,7 @@ class Vehicle:
         self.trail = self.control.trail
         self.linkmap = self.control.linkmap
         self._map_owner: int | None = None  # whose packets the link map counts (a new owner has its own rate)
+        self.rssi_report: tuple[float, float] | None = None  # (t, dBm): the radio's last report of the owner's signal
         self.reached = self.returns.reached
 
     # what the parts keep, under the names the endpoint, the telemetry and the simulator read
@@ -162,10 +165,19 @@ class Vehicle:
                 self.linkmap.forget_sender()
             self.linkmap.packet(t, seq)
 
-    def radio_rssi(self, dbm: float) -> None:
-        """The vehicle's own radio reports the owner's signal strength (a SiK radio's RADIO_STATUS, or the
-        simulator's channel): the link map keeps its mean per place."""
+    def radio_rssi(self, dbm: float, t: float | None = None) -> None:
+        """The vehicle's own radio reports the owner's signal strength at ``t`` (default: this tick), from a SiK
+        radio's RADIO_STATUS (``vehicle.radio_status``) or the simulator's channel: the link map keeps its mean per
+        place, and the crumbs laid while it is fresh carry it in their link tag (``rssi_at``). It never decides a
+        loss or a regain: the owner's packet delivery and silence do (``vehicle.link_watch``)."""
         self.linkmap.rssi(dbm)
+        self.rssi_report = (self.t if t is None else t, dbm)
+
+    def rssi_at(self, t: float) -> float:
+        """The owner's signal at the robot now (dBm): the radio's last report if at most RSSI_STALE_S old, else
+        nan (unknown: no radio, or it stopped reporting)."""
+        r = self.rssi_report
+        return r[1] if r is not None and t - r[0] <= RSSI_STALE_S else math.nan
 
     # ----- the root and the execution leases ---------------------------------------------------------------
     def acquire(self, sender: int, compid: int, t: float, allow_takeover: bool) -> Check:

@@ -10,7 +10,6 @@ checked against the lease once more at the actuator; a return-service lease is d
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from typing import TYPE_CHECKING
 
@@ -77,7 +76,7 @@ class ControlLoop:
         if v.contingency is not None:
             v.contingency.observe(v, t)
         self.pace += PACE_GAIN * (abs(r.speed) - self.pace)
-        self._crumbs.append(Crumb(p.x, p.y, t, p.std, good, math.nan, self.pace))
+        self._crumbs.append(Crumb(p.x, p.y, t, p.std, good, v.rssi_at(t), self.pace))  # (RSSI: nan unless fresh)
 
         # a regain halts a return only where the link map says the link holds (asked only while the link is lost)
         holds = not book.link.lost or self.returns.place_holds(p.x, p.y)

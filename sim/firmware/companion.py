@@ -11,6 +11,15 @@ firmware only what the lease allows. Same seeds, same jams, same RADIO_STATUS as
 (the firmware waits for its physics answer meanwhile, so which of its loops sees them never depends on timing),
 its frames to the ground leave through the radio with the next tick's.
 
+The telemetry radio has two ends here as on a real rover: the operator's reports to its ground station (as for every
+policy), and the vehicle-side radio on the companion's ground port, which injects RADIO_STATUS once a second as a
+SiK radio does, its ``rssi`` the operator station's signal at the robot (the radio model's channel, quantised to
+SiK units by ``link.proxy.RadioReport``). The companion reads it as it would read a real radio's
+(``vehicle.radio_status``): the link map's ``rssi_dbm`` and the crumbs' RSSI. Like the native runner, which feeds
+its vehicle the same channel at the same moments (``sim.runner.Run._radio_status``), the radio reports nothing
+while the operator's station is dead or jammed. ``linkmap.csv`` is the companion's map (``sim.outputs``), in the
+autopilot's local frame (x north, y east from the scenario's start, ``frame_offset``), as the vehicle knows it.
+
 The companion's returnlink parameters are the native vehicle's: the defaults with the scenario's own on top. The
 firmware's are those of ``firmware_params("companion")``: its GCS failsafe on with Hold as the backstop, the rest
 of what ``returnlink companion --check`` asks for.
@@ -30,6 +39,7 @@ from pathlib import Path
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from gcs.plans import from_plan_items
+from link.proxy import RadioReport
 from sim.firmware.companion_operator import CompanionOperator
 from sim.firmware.run import FirmwareRun
 from sim.lease_record import LeaseRecord
@@ -45,6 +55,7 @@ from vehicle.params import load_defaults
 # what a forwarded frame needs to be audited: it changes the robot's state under a lease
 _AUDITED = frozenset((router.Authority.LEASE, router.Authority.MODE))
 _COMPID_AT = {0xFD: 6, 0xFE: 4}  # MAVLink 2 / 1 start byte -> the byte that holds the sender's component id
+AIR_RADIO = "radio"  # the source the vehicle-side radio's frames come from, on the companion's ground side
 
 
 class CompanionRun(LeaseRecord, FirmwareRun):
@@ -70,6 +81,7 @@ class CompanionRun(LeaseRecord, FirmwareRun):
         self._parser = apm.MAVLink(None, 0, 0)
         self._parser.robust_parsing = True
         self.forwarded = 0  # ground frames the companion passed to the firmware
+        self.air_radio = RadioReport()  # the vehicle-side telemetry radio: its own sequence numbers
 
     def _make_operator(self, sc: Scenario) -> CompanionOperator:
         return CompanionOperator(sc.route, sc.resume_route, self.origin, from_plan_items(sc.plan), sc.attempts,
@@ -100,6 +112,14 @@ class CompanionRun(LeaseRecord, FirmwareRun):
         self.companion.tick(t)
         if before is not None:
             self._vehicle_ticked(v, t, before)
+
+    def _radio_status(self, t: float) -> None:
+        """The ground-side report as for every policy, and the vehicle-side radio's RADIO_STATUS to the companion,
+        straight onto its ground port (the radio sits on the robot: no radio hop, no loss)."""
+        super()._radio_status(t)
+        op = self.op_station
+        if op.alive and op.state is not None and not self._jammed(op.name, t):
+            self.companion.from_ground(self.air_radio.frame(op.state), t, AIR_RADIO)
 
     def _to_autopilot(self, data: bytes) -> None:
         """The companion's wire to the firmware; a ground frame it forwards is audited on the way."""

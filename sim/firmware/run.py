@@ -227,11 +227,7 @@ class FirmwareRun:
         self._vehicle_tick(t)
         if t >= self.next_radio_status:
             self.next_radio_status = t + 1.0
-            op = self.op_station
-            if op.alive and op.state is not None and op.operator is not None:
-                data = self.radio_report.frame(op.state, jammed=self._jammed(op.name, t))
-                op.operator.feed(data, t)
-                self._log_frame(data, t)
+            self._radio_status(t)
         self._record(t, pos)
 
     # ----- the vehicle's side of the radio: the firmware's SERIAL0 itself -------------------------------------
@@ -248,6 +244,15 @@ class FirmwareRun:
 
     def _vehicle_tick(self, t: float) -> None:
         """Whatever runs on the vehicle beside the firmware, once a tick after the radio delivered: here nothing."""
+
+    def _radio_status(self, t: float) -> None:
+        """Once a second: the operator's telemetry radio reports both ends' RSSI to its ground station, as a SiK
+        radio would."""
+        op = self.op_station
+        if op.alive and op.state is not None and op.operator is not None:
+            data = self.radio_report.frame(op.state, jammed=self._jammed(op.name, t))
+            op.operator.feed(data, t)
+            self._log_frame(data, t)
 
     def _log_frame(self, data: bytes, t: float) -> None:
         self.tlog.append(_TLOG_STAMP(TLOG_EPOCH_US + int(t * 1e6)) + data)

@@ -32,8 +32,10 @@ from vehicle.companion.router import COMPANION_COMPID, Action, Authority, Decisi
 from vehicle.companion.voice import GroundVoice, frame_msgid
 from vehicle.endpoint import Endpoint
 from vehicle.keystore import KeyStore, boot_stamp
-from vehicle.lease import ExpireReason
+from vehicle.lease import ExpireReason, Holder
 from vehicle.params import Params
+from vehicle.radio_status import KINDS as RADIO_REPORTS
+from vehicle.radio_status import rssi_dbm
 from vehicle.services.native import vehicle_services
 from vehicle.services.telemetry import DEFAULT_RATES
 
@@ -52,6 +54,24 @@ DUPLICATES = frozenset((apm.MAVLINK_MSG_ID_SYS_STATUS, apm.MAVLINK_MSG_ID_GPS_RA
 # (lease and control status), and without teleop: setpoints are the autopilot's business (component 1)
 OWN_STREAMS = {msgid: interval for msgid, interval in DEFAULT_RATES.items() if msgid not in DUPLICATES}
 SERVICES = partial(vehicle_services, rates=OWN_STREAMS, drives=False)
+
+# the owner's drive of the autopilot in GUIDED: what the dead-man watches (MANUAL_CONTROL and RC override have the
+# autopilot's own override timeout, RC_OVERRIDE_TIME)
+SETPOINTS = frozenset(("SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT"))
+STOP_RESEND = 1.0  # s between repeated stops while the owner stays silent (one may be lost on the wire)
+
+
+def drive_held(t: float, setpoint_at: float | None, owner_heard: float | None, hold_s: float) -> bool:
+    """The companion's dead-man (LNK_HOLD_S): the owner's setpoints drive the autopilot and the owner has been
+    silent ``hold_s``. The native vehicle drops a teleop setpoint 0.5 s after its stream stops; an autopilot drives
+    on to the owner's last position target for as long as nobody says otherwise, which before this rule was the
+    whole LNK_TIMEOUT before the return took it back (issue 28: some 3 m past the loss in the tunnel, 6 m on a
+    field). Silence, not the setpoints' own rate, is the test: a ground station that sends a position target only
+    when it changes still sends its heartbeat every second."""
+    if hold_s <= 0 or setpoint_at is None:
+        return False
+    last = setpoint_at if owner_heard is None else max(setpoint_at, owner_heard)
+    return t - last >= hold_s
 
 class Companion:
     """returnlink beside an ArduPilot Rover. Build it, feed it bytes, tick it at 50 Hz (see the module docstring)."""
@@ -92,7 +112,9 @@ class Companion:
         self.preempted = False
         self.sources: dict[int, Hashable] = {}  # ground sysid -> where its last trusted frame came from
         self.notice_at: dict[tuple[int, str], float] = {}
-        self.counters = {"forwarded": 0, "refused": 0, "relayed": 0, "bad_frames": 0}
+        self.counters = {"forwarded": 0, "refused": 0, "relayed": 0, "bad_frames": 0, "drive_held": 0}
+        self.setpoint_at: float | None = None  # the owner's last setpoint forwarded to the autopilot
+        self.stopped_at: float | None = None  # the dead-man's last stop (None: not holding)
 
     # ----- input -----------------------------------------------------------------------------------------------
     def from_autopilot(self, data: bytes, t: float) -> None:
@@ -150,6 +172,15 @@ class Companion:
         sysid = self.driver.seen.sysid
         if sender == 0 or sysid is None or sender == sysid:
             return  # anonymous, before the autopilot is known, or the vehicle's own frames come back
+        if m.get_type() in RADIO_REPORTS:
+            # the telemetry radio's report (any sender: SiK radios are 51/68, and cannot sign, so it counts signed
+            # or not, as ArduPilot accepts it unsigned): its local RSSI is the owner's signal at the robot, for the
+            # link map and the crumbs (never the loss trigger). Then on to the endpoint as before (Dest.KEEP)
+            dbm = rssi_dbm(m)
+            counted = "radio_ignored" if dbm is None else "radio_reports"
+            self.counters[counted] = self.counters.get(counted, 0) + 1
+            if dbm is not None and self.vehicle is not None:
+                self.vehicle.radio_rssi(dbm, t)
         raw = bytes(m.get_msgbuf())
         trusted = True
         if self.key is not None:
@@ -185,6 +216,8 @@ class Companion:
             self.counters["forwarded"] += 1
             if r.authority is Authority.MODE:
                 self.mode_from_ground = True
+            elif m.get_type() in SETPOINTS:
+                self.setpoint_at, self.stopped_at = t, None
             return
         self._refuse(m, d, sender, scomp, t)
 
@@ -293,7 +326,29 @@ class Companion:
             d.engage(t)
         elif not returning and d.engaged:
             d.release(t, hold=not (self.mode_from_ground or self.preempted))
+        if not returning:
+            self._dead_man(t)
         return True
+
+    def _dead_man(self, t: float) -> None:
+        """Stop the autopilot's drive once the owner driving it with setpoints has fallen silent (``drive_held``):
+        a zero-velocity target, repeated every STOP_RESEND s while the silence lasts. The owner's next setpoint
+        drives again; a return that follows finds the autopilot in GUIDED and standing."""
+        v, d = self.vehicle, self.driver
+        assert v is not None
+        cur = v.book.current
+        if (cur is None or cur.holder is not Holder.OPERATOR or not d.armed or self.autopilot_lost
+                or not drive_held(t, self.setpoint_at, v.book.link.last_heard, v.params["LNK_HOLD_S"])):
+            return
+        if self.stopped_at is not None and t - self.stopped_at < STOP_RESEND:
+            return
+        if d.stop():
+            if self.stopped_at is None:
+                self.counters["drive_held"] += 1
+                silent = t - max(self.setpoint_at or t, v.book.link.last_heard or -math.inf)
+                self.notice(0, "dead-man", f"owner silent {silent:.1f} s: the autopilot's drive stopped "
+                                           f"(LNK_HOLD_S)", t)
+            self.stopped_at = t
 
     def _watch_autopilot(self, t: float) -> None:
         """The autopilot silent for LOST_AFTER: said to the ground, and whatever lease was current ends (nothing

@@ -310,6 +310,17 @@ class AutopilotDriver:
             0, self.seen.sysid, self.seen.compid, apm.MAV_FRAME_BODY_NED, mask, 0, 0, 0, speed, 0, 0, 0, 0, 0, 0,
             yaw_rate))
 
+    def stop(self) -> bool:
+        """A zero-velocity target: the rover stops where it is and stays in GUIDED, so a return that follows
+        drives at once, with no mode switch (the companion's dead-man over the owner's drive, ``Companion``).
+        False: nothing sent (the autopilot is not in GUIDED, or not known yet)."""
+        if self.enc is None or self.seen.mode != GUIDED:
+            return False
+        mask = 0b0000_0101_1100_0111  # as ``_target``: velocity and yaw rate used, all zero
+        self.send_message(self.enc.set_position_target_local_ned_encode(
+            0, self.seen.sysid, self.seen.compid, apm.MAV_FRAME_BODY_NED, mask, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0))
+        return True
+
     def _keepalive(self) -> None:
         s = self.seen
         gcs = next((int(s.params[p]) for p in GCS_SYSID_PARAMS if p in s.params), 255)
