@@ -1,0 +1,110 @@
+"""The README's desk walkthrough of companion mode, run exactly as printed against the real ArduPilot Rover SITL.
+
+The shell block and the Python block are read out of README.md, not copied here: a walkthrough that drifts from the
+code fails this test. The shell lines run in a fresh directory holding the SITL's ``rover.parm``, with the firmware
+and ``returnlink`` on PATH, as the README asks; a line ending in ``&`` is started in the background and stopped by
+its own process id when the test ends (SIGTERM, then SIGKILL: the firmware ignores SIGTERM at times). The Python
+block is the operator; its last line says where the rover stopped, which must be within a few metres inside the
+station's range: where the link came back, not all the way home (issue 28: it stopped 6.6 m inside before).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.ardurover import firmware
+
+pytestmark = [pytest.mark.firmware, pytest.mark.interop]
+
+README = Path(__file__).resolve().parent.parent / "README.md"
+SECTION = "To try it on a desk with the SITL firmware"
+# how far inside the station's range the rover may stop: the return ends at the first place back along the trail
+# the link map vouches for (a cell whose neighbourhood held the link, docs/architecture.md §6), a cell or two inside
+# the range's edge, then brakes (measured: 6.0 and 6.2 m)
+WITHIN_M = 7.5
+
+
+def blocks() -> tuple[list[str], str]:
+    """The walkthrough's shell lines and its Python program, from the README."""
+    text = README.read_text()
+    at = text.index(SECTION)
+    shell = re.search(r"```\n(.*?)```", text[at:], re.S)
+    program = re.search(r"```python\n(.*?)```", text[at:], re.S)
+    assert shell is not None and program is not None, "the walkthrough's code blocks are missing from README.md"
+    lines = [ln.split("#", 1)[0].strip() if not ln.startswith("printf") else ln.strip()
+             for ln in shell.group(1).splitlines()]
+    return [ln for ln in lines if ln], program.group(1)
+
+
+def free(port: int, kind: int) -> bool:
+    s = socket.socket(socket.AF_INET, kind)
+    try:
+        s.bind(("127.0.0.1", port))
+        return True
+    except OSError:
+        return False
+    finally:
+        s.close()
+
+
+def stop(proc: subprocess.Popen) -> None:
+    if proc.poll() is not None:
+        return
+    os.killpg(proc.pid, signal.SIGTERM)
+    try:
+        proc.wait(5)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(5)
+
+
+def test_the_readme_desk_walkthrough_runs_as_printed(tmp_path):
+    exe = firmware()
+    assert free(5760, socket.SOCK_STREAM) and free(14550, socket.SOCK_DGRAM), \
+        "the walkthrough's ports (tcp 5760, udp 14550) are taken: another SITL or ground station is running"
+    lines, program = blocks()
+    shutil.copy(exe.with_name("rover.parm"), tmp_path / "rover.parm")
+    tools = tmp_path / "bin"
+    tools.mkdir()
+    (tools / "ardurover").symlink_to(exe)
+    # the project's environment first: its python3 has pymavlink, its bin has returnlink
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{tools}{os.pathsep}{os.environ['PATH']}"}
+    env.pop("PYTHONPATH", None)
+    background: list[subprocess.Popen] = []
+    try:
+        for n, line in enumerate(lines):
+            if line.endswith("&"):
+                log = (tmp_path / f"background{n}.log").open("w")
+                background.append(subprocess.Popen(["bash", "-c", line[:-1]], cwd=tmp_path, env=env, stdout=log,
+                                                   stderr=subprocess.STDOUT, start_new_session=True))
+                continue
+            done = subprocess.run(["bash", "-c", line], cwd=tmp_path, env=env, capture_output=True, text=True,
+                                  timeout=60)
+            assert done.returncode == 0, f"`{line}` failed:\n{done.stdout}\n{done.stderr}"
+        (tmp_path / "desk.py").write_text(program)
+        run = subprocess.run(["python3", "desk.py"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                             timeout=300)
+        logs = "\n".join(p.read_text()[-2000:] for p in sorted(tmp_path.glob("background*.log")))
+        assert run.returncode == 0, f"desk.py failed:\n{run.stdout}\n{run.stderr}\n{logs}"
+    finally:
+        for proc in reversed(background):
+            stop(proc)
+    print(run.stdout)
+    radio = float(re.search(r"^RANGE = ([0-9.]+)", program, re.M).group(1))
+    last = run.stdout.strip().splitlines()[-1]
+    m = re.match(r"(LINK_REGAINED|COMPLETED): stopped in HOLD ([0-9.]+) m from home", last)
+    assert m is not None, f"the walkthrough ended with {last!r}"
+    rest = float(m.group(2))
+    assert radio - WITHIN_M <= rest <= radio + 0.5, \
+        f"stopped {rest:.1f} m from home, the station heard within {radio:g} m"
+    out = float(re.search(r"the rover ([0-9.]+) m out", run.stdout).group(1))
+    assert out > radio, "the link was lost before the rover left the station's range"
