@@ -21,6 +21,7 @@ from pathlib import Path
 
 import pytest
 
+from sim.firmware.process import port_free
 from tests.ardurover import firmware
 
 pytestmark = [pytest.mark.firmware, pytest.mark.interop]
@@ -45,17 +46,6 @@ def blocks() -> tuple[list[str], str]:
     return [ln for ln in lines if ln], program.group(1)
 
 
-def free(port: int, kind: int) -> bool:
-    s = socket.socket(socket.AF_INET, kind)
-    try:
-        s.bind(("127.0.0.1", port))
-        return True
-    except OSError:
-        return False
-    finally:
-        s.close()
-
-
 def stop(proc: subprocess.Popen) -> None:
     if proc.poll() is not None:
         return
@@ -69,7 +59,7 @@ def stop(proc: subprocess.Popen) -> None:
 
 def test_the_readme_desk_walkthrough_runs_as_printed(tmp_path):
     exe = firmware()
-    assert free(5760, socket.SOCK_STREAM) and free(14550, socket.SOCK_DGRAM), \
+    assert port_free(socket.SOCK_STREAM, 5760) and port_free(socket.SOCK_DGRAM, 14550), \
         "the walkthrough's ports (tcp 5760, udp 14550) are taken: another SITL or ground station is running"
     lines, program = blocks()
     shutil.copy(exe.with_name("rover.parm"), tmp_path / "rover.parm")

@@ -47,7 +47,8 @@ class FirmwareError(RuntimeError):
     """The firmware could not be started, died, restarted, or never became ready; the message says which."""
 
 
-def _port_free(kind: int, port: int) -> bool:
+def port_free(kind: int, port: int) -> bool:
+    """Whether 127.0.0.1:``port`` can be bound for ``kind`` (SOCK_STREAM or SOCK_DGRAM) now."""
     s = socket.socket(socket.AF_INET, kind)
     try:
         s.bind(("127.0.0.1", port))
@@ -79,7 +80,7 @@ def claim_instance(start: int | None = None) -> tuple[int, socket.socket]:
             continue
         others = [(socket.SOCK_STREAM, p + off) for p in SERIAL_TCP_PORTS]
         others += [(socket.SOCK_DGRAM, SIM_IN_PORT + off), (socket.SOCK_DGRAM, RC_IN_PORT + off)]
-        if all(_port_free(kind, port) for kind, port in others):
+        if all(port_free(kind, port) for kind, port in others):
             return n, sock
         sock.close()
     raise FirmwareError("no free firmware instance: every port set 0..199 is in use on this machine")
