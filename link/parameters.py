@@ -53,9 +53,9 @@ SPECS: tuple[ParamSpec, ...] = (
               "a reliable cell's delivery lower bound exceeds LNK_MIN_Q by this"),
     ParamSpec("LNK_MAP_SEEK", 0.0, 0.0, 1000.0, "m",
               "at the map's place with the link still down, go on back along the trail this far (0 = stay)"),
-    ParamSpec("LNK_HOLD_S", 1.5, 0.0, 10.0, "s",
-              "companion: the owner silent this long while its setpoints drive the autopilot in GUIDED -> the "
-              "drive is stopped (0 = never, for owners who send one long position target)"),
+    ParamSpec("LNK_HOLD_S", 1.0, 0.0, 10.0, "s",
+              "companion: the owner driving the autopilot with setpoints in GUIDED silent this long (and longer "
+              "than its longest gap between packets of the last 5 s) -> the drive is stopped (0 = never)"),
 )
 BY_NAME = {s.name: s for s in SPECS}
 

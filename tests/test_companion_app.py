@@ -387,7 +387,8 @@ def test_the_owner_falling_silent_mid_drive_stops_the_autopilot_within_lnk_hold_
     rig.deliver = lambda gs, t: gs is not owner
     since, silent_at = len(rig.ap.received), rig.t
     assert rig.run(2.0, lambda: bool(stops_from_191(rig, since)))
-    assert rig.t - silent_at <= 1.5 + 0.1  # LNK_HOLD_S, not the 3 s LNK_TIMEOUT nor the autopilot's own 3 s
+    # LNK_HOLD_S (1 s: its heartbeat's period), not the 3 s LNK_TIMEOUT nor the autopilot's own 3 s
+    assert rig.t - silent_at <= 1.0 + 0.1
     assert rig.ap.speed == 0.0 and rig.ap.mode == GUIDED  # stopped, and still in GUIDED for the return
     assert not rig.companion.vehicle.book.returning
     assert rig.companion.counters["drive_held"] == 1
@@ -403,8 +404,41 @@ def test_lnk_hold_s_0_leaves_the_owners_last_target_to_the_autopilot():
     assert not stops_from_191(rig, since) and rig.ap.speed == 2.0
 
 
-def test_an_owner_who_stops_sending_targets_but_keeps_its_heartbeat_is_not_stopped():
+def test_a_stick_let_go_while_the_heartbeat_goes_on_is_left_to_the_autopilots_own_time_out():
     rig, owner = driving_north()
     since = len(rig.ap.received)
-    rig.run(2.5)  # heartbeats only: the owner is there, it has just not moved its target
+    rig.run(2.5)  # heartbeats only now: the owner is there, its stick let go (Rover stops the target after 3 s)
     assert not stops_from_191(rig, since)
+
+
+def test_an_owner_who_sent_one_goal_and_keeps_its_heartbeat_is_never_held():
+    rig, owner = owned()
+    rig.send_as(owner, lambda m: m.command_long_encode(1, 1, apm.MAV_CMD_DO_SET_MODE, 0, 1, GUIDED, 0, 0, 0, 0, 0))
+    assert rig.run(1, lambda: rig.ap.mode == GUIDED)
+    since = len(rig.ap.received)
+    rig.send_as(owner, lambda m: m.set_position_target_local_ned_encode(
+        0, 1, 1, apm.MAV_FRAME_LOCAL_NED, 0x0DF8, 40, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0))
+    rig.run(2.5)  # a single position target (a "go to"), then the heartbeat alone: no rhythm to miss
+    assert not stops_from_191(rig, since)
+
+
+def stream(rig: Rig, owner, seconds: float, vx: float = 2.0) -> None:
+    for _ in range(int(round(seconds / 0.1))):
+        rig.send_as(owner, lambda m: m.set_position_target_local_ned_encode(
+            0, 1, 1, apm.MAV_FRAME_BODY_NED, 0x05C7, 0, 0, 0, vx, 0, 0, 0, 0, 0, 0, 0))
+        rig.run(0.1)
+
+
+def test_a_lossy_owner_is_held_once_then_its_holes_are_its_rhythm():
+    rig, owner = driving_north()
+    # the fringe: the owner's stream gets through a second in 2.5 (above LNK_MIN_Q), with 1.5 s holes: longer
+    # than LNK_HOLD_S
+    rig.deliver = lambda gs, t: gs is not owner or (t % 2.5) < 1.0
+    stream(rig, owner, 10.0)
+    # the first hole is a silence like any other; after it, 1.5 s holes are the owner's rhythm (a hold only
+    # after a longer one), where a fixed LNK_HOLD_S would stop the rover at every hole
+    assert rig.companion.counters["drive_held"] == 1
+    rig.deliver = lambda gs, t: gs is not owner
+    held, silent_at = rig.companion.counters["drive_held"], rig.t
+    assert rig.run(3, lambda: rig.companion.counters["drive_held"] > held)
+    assert rig.t - silent_at <= 1.5 + 0.1

@@ -23,6 +23,8 @@ from vehicle.companion.router import COMPANION_COMPID
 
 _AWAITING_CLAIM, _TELEOP = mav.RETURNLINK_STATE_AWAITING_CLAIM, mav.RETURNLINK_STATE_TELEOP
 _TAKING_CONTROL = frozenset(("connect", "acquiring", "uploading"))  # the lease steps before the firmware's own
+STICK_PERIOD = 0.1  # s: a held stick is streamed as the native operator's is (gcs.station.TELEOP_PERIOD)
+HELD_STICK = 0x05C7  # SET_POSITION_TARGET type mask: velocity and yaw rate used (all zero)
 
 
 class CompanionOperator(FirmwareOperator):
@@ -34,6 +36,7 @@ class CompanionOperator(FirmwareOperator):
         self.pending = None  # the lease command in flight (acquire, claim)
         self.transfer = None  # the plan upload
         self.claims = 0
+        self.next_stick = 0.0
 
     # ----- what it hears and sends -----------------------------------------------------------------------------
     def feed(self, data: bytes, t: float) -> None:
@@ -92,6 +95,14 @@ class CompanionOperator(FirmwareOperator):
         if st.state == _TELEOP and mine:
             self._step(t)
             return
-        # the return holds the lease: what was being driven toward counts as cut off, and nothing is sent
+        # the return holds the lease: what was being driven toward counts as cut off; while its picture is fresh
+        # the operator holds its stick still, as the native operator does (``gcs.station.GroundStation.stop``): a
+        # zero-velocity target to the autopilot at 10 Hz, which the companion refuses under the return's lease but
+        # hears, so a regain is judged on the same stream for every robot (a heartbeat alone is three seconds of
+        # packets for the three a regain needs)
         self.cut_off = self.heading_to or self.cut_off
         self.sent_target = None
+        if self.fresh(t) and t >= self.next_stick:
+            self.next_stick = t + STICK_PERIOD
+            self._send(mav.MAVLink_set_position_target_local_ned_message(
+                0, self.target, 1, mav.MAV_FRAME_BODY_NED, HELD_STICK, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0))
