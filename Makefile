@@ -29,7 +29,7 @@ test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest
 
-# the pure cores, their properties and the in-process protocol tests (tiers: tests/conftest.py), under a minute
+# the pure cores, their properties and the in-process protocol tests (tiers: pytestmark in each test file), under a minute
 test-fast: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -m "not slow and not interop and not firmware"

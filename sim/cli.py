@@ -118,8 +118,8 @@ def _cmd_sim_run(args: argparse.Namespace) -> int:
 
         run = Run(sc, kind, seed, progress=not args.quiet, policy=policy).run()
     else:
+        from sim.firmware.companion import firmware_run
         from sim.firmware.process import FirmwareError, stop_on_terminate
-        from sim.firmware.run import firmware_run
 
         print(f"returnlink: firmware {firmware}", file=sys.stderr)
         try:

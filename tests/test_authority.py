@@ -3,6 +3,8 @@ time."""
 
 from __future__ import annotations
 
+import pytest
+
 from tests.harness import Pair
 from vehicle.app import State
 from vehicle.services.base import mav
@@ -106,6 +108,7 @@ def test_a_stranger_cannot_change_telemetry_rates_of_an_owned_vehicle_but_may_re
     assert mine.ok and 9 <= _count(pair, "ATTITUDE", 1.0) <= 11  # the owner may
 
 
+@pytest.mark.interop
 def test_strangers_cycling_source_ports_do_not_starve_the_owners_downlink():
     """`sim serve` on loopback: the owner acquires, then 20 strangers send from 20 source ports in turn. The owner
     keeps receiving the whole downlink: as many frames as the fixed peer, which nobody can evict."""

@@ -20,6 +20,8 @@ from sim.campaign.trial import Trial, run_trial, simulate, trial_id
 from sim.cli import main
 from tests.campaign_helpers import TUNNEL, jam_scenario, quick_row, write_spec
 
+pytestmark = pytest.mark.slow
+
 
 # ----- specs ---------------------------------------------------------------------------------------------------
 def test_spec_is_the_cartesian_product_with_inclusive_seed_range(tmp_path):

@@ -10,6 +10,8 @@ from sim.campaign.store import summary
 from sim.campaign.trial import scenario_of, simulate
 from tests.campaign_helpers import quick_row
 
+pytestmark = pytest.mark.slow
+
 
 def test_a_radio_grid_multiplies_the_trials_and_reaches_their_scenario():
     spec = parse_spec('scenarios = ["tunnel"]\nseeds = [1]\n[radio]\npower_dbm = [-20, 20.0]\nexponent = [2.5]\n',

@@ -25,6 +25,8 @@ from sim.cli import main
 from tests.campaign_helpers import dies_once, ignores_alarm, jam_scenario, pid_row, sleeps, write_spec
 from tests.interop import free_udp_port
 
+pytestmark = pytest.mark.interop
+
 RAY = Path(sys.executable).with_name("ray")
 
 

@@ -7,10 +7,13 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from sim import outputs
 from sim.runner import Run
 from sim.scenario import load
+
+pytestmark = pytest.mark.slow
 
 
 def _run(clearance: float):

@@ -13,6 +13,8 @@ from sim.cli import main
 from sim.metrics import KEYS
 from tests.interop import ServedVehicle
 
+pytestmark = pytest.mark.interop
+
 
 def returnlink(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "sim.cli", *args], capture_output=True, text=True,

@@ -27,6 +27,8 @@ from vehicle.companion.setup import check, differing, report
 from vehicle.companion.tlog import FROM_AUTOPILOT, FROM_GROUND, TO_AUTOPILOT, TO_GROUND, Tlog
 from vehicle.params import Params
 
+pytestmark = pytest.mark.interop
+
 
 def free_tcp_port() -> int:
     s = socket.socket()

@@ -16,6 +16,8 @@ from tests.ardurover import Firmware
 from tests.companion_live import CompanionProcess, LiveStation, pump
 from tests.interop import MAVProxy
 
+pytestmark = pytest.mark.firmware
+
 mav = dialect.load()
 GUIDED, HOLD = 15, 4
 RANGE_M = 15.0  # the test's radio: the operator is heard only within this of home

@@ -110,6 +110,7 @@ def test_shell_keeps_the_link_through_a_10_s_idle():
     assert link.vehicle.book.owner == 255 and link.vehicle.armed
 
 
+@pytest.mark.interop
 def test_shell_script_stops_at_the_first_refused_command(served):
     script = "acquire\nparam set LNK_TIMEOUT 999\nrtl\n"
     r = gcs("--url", f"udpin:127.0.0.1:{served.gcs_port}", "shell", stdin=script)
@@ -119,11 +120,13 @@ def test_shell_script_stops_at_the_first_refused_command(served):
     assert served.vehicle.state() != 3  # not RETURNING
 
 
+@pytest.mark.interop
 def test_shell_script_rejects_an_unknown_command_with_exit_2(served):
     r = gcs("--url", f"udpin:127.0.0.1:{served.gcs_port}", "shell", stdin="status\nfly away\n")
     assert r.returncode == 2 and "invalid choice" in r.stderr
 
 
+@pytest.mark.interop
 def test_shell_drives_until_stopped_with_forward_speed_and_turn_rate(served):
     script = "acquire\narm\nmanual 0.5 0\nwait 2\nstop\nstatus\n"
     r = gcs("--url", f"udpin:127.0.0.1:{served.gcs_port}", "shell", stdin=script)
@@ -145,6 +148,7 @@ def test_one_shot_and_shell_share_one_command_table():
         assert parser.parse_args(["gcs", *words]).command_path == c.path
 
 
+@pytest.mark.interop
 def test_drive_refused_while_awaiting_claim_exits_1_and_says_claim(served, capsys):
     url = ["gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}"]
     assert main([*url, "acquire"]) == 0
@@ -158,6 +162,7 @@ def test_drive_refused_while_awaiting_claim_exits_1_and_says_claim(served, capsy
     assert main([*url, "drive", "0.5", "0", "1"]) == 0
 
 
+@pytest.mark.interop
 def test_a_file_that_cannot_be_written_is_a_message_and_exit_2(served, tmp_path, capsys):
     url = ["gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}"]
     for command in (["plan", "download"], ["param", "save"]):
@@ -165,6 +170,7 @@ def test_a_file_that_cannot_be_written_is_a_message_and_exit_2(served, tmp_path,
         assert "cannot write" in capsys.readouterr().err
 
 
+@pytest.mark.interop
 def test_unknown_parameter_is_named_not_a_time_out(served, capsys):
     url = ["gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}"]
     assert main([*url, "param", "get", "NO_SUCH_PARAM"]) == 1
@@ -174,6 +180,7 @@ def test_unknown_parameter_is_named_not_a_time_out(served, capsys):
     assert "unknown parameter 'NO_SUCH_PARAM'" in capsys.readouterr().err
 
 
+@pytest.mark.interop
 def test_a_file_the_vehicle_does_not_offer_is_named_not_a_time_out(served, capsys):
     url = ["gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}"]
     assert main([*url, "file", "get", "@PARAM/param.pck"]) == 1
@@ -181,6 +188,7 @@ def test_a_file_the_vehicle_does_not_offer_is_named_not_a_time_out(served, capsy
     assert "file @PARAM/param.pck: file not found" in err and "timed out" not in err
 
 
+@pytest.mark.interop
 def test_file_get_saves_the_vehicles_link_map_as_it_has_it(served, tmp_path, capsys):
     url = ["gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}"]
     out = tmp_path / "linkmap.csv"
@@ -190,6 +198,7 @@ def test_file_get_saves_the_vehicles_link_map_as_it_has_it(served, tmp_path, cap
     assert f"saved {out.stat().st_size} bytes of linkmap.csv" in capsys.readouterr().out
 
 
+@pytest.mark.interop
 def test_param_set_to_nan_is_reported_refused_not_done(served, capsys):
     """The command line refuses NaN as a bad argument (exit 2); a library caller that sends it anyway is told the
     vehicle refused it, never that it was set (NaN compares unequal to the echoed old value)."""
@@ -204,6 +213,7 @@ def test_param_set_to_nan_is_reported_refused_not_done(served, capsys):
     assert served.vehicle.params["LNK_TIMEOUT"] == 3.0
 
 
+@pytest.mark.interop
 def test_connect_waits_for_the_heartbeat_not_just_any_message():
     """A LEASE_STATUS alone is not a vehicle: ``status`` must not print "vehicle 0, armed no"."""
     port = free_udp_port()
@@ -225,11 +235,13 @@ def test_connect_waits_for_the_heartbeat_not_just_any_message():
     sock.close()
 
 
+@pytest.mark.interop
 def test_status_reports_the_vehicle(served, capsys):
     assert main(["gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}", "status"]) == 0
     assert capsys.readouterr().out.startswith("vehicle 1  ")
 
 
+@pytest.mark.interop
 def test_closed_stdout_ends_quietly(served):
     proc = subprocess.Popen([sys.executable, "-m", "sim.cli", "gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}",
                              "param", "get"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
@@ -239,6 +251,7 @@ def test_closed_stdout_ends_quietly(served):
     assert b"Traceback" not in err and b"BrokenPipe" not in err
 
 
+@pytest.mark.interop
 @pytest.mark.parametrize("url", ["bogus", "udpin:127.0.0.1:notaport", "tcp:127.0.0.1:5760"])
 def test_bad_url_exits_2_with_a_message(url, capsys):
     with pytest.raises(SystemExit) as e:  # refused by the argument's own type, before anything opens
@@ -248,18 +261,21 @@ def test_bad_url_exits_2_with_a_message(url, capsys):
     assert "--url" in err and ("udpin:HOST:PORT" in err or "port" in err)
 
 
+@pytest.mark.interop
 def test_map_port_out_of_range_exits_2_before_connecting(capsys):
     with pytest.raises(SystemExit) as e:
         main(["gcs", "--url", f"udpin:127.0.0.1:{free_udp_port()}", "map", "--port", "99999"])
     assert e.value.code == 2 and "--port" in capsys.readouterr().err
 
 
+@pytest.mark.interop
 def test_one_shot_drive_needs_seconds(capsys):
     """A one-shot command's link ends when it returns: "drive until stopped" would be a lie there."""
     assert main(["gcs", "--url", f"udpin:127.0.0.1:{free_udp_port()}", "drive", "1", "0"]) == 2
     assert "give SECONDS" in capsys.readouterr().err
 
 
+@pytest.mark.interop
 def test_shell_prompt_completes_lists_and_survives_a_bad_line(capsys):
     """At a terminal a bad line is a message, not the end of the session; names complete from the one table."""
     import io

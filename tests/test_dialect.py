@@ -82,6 +82,7 @@ def test_the_onboard_mirrors_of_dialect_enums_match_it_by_name_and_value(mirror,
     assert _mirror_members(mirror) == _dialect_entries(enum_name)
 
 
+@pytest.mark.interop
 def test_any_pymavlink_program_can_use_the_dialect_by_name():
     code = ("from pymavlink import mavutil\n"
             "c = mavutil.mavlink_connection('udpout:127.0.0.1:9', dialect='returnlink')\n"
@@ -92,6 +93,7 @@ def test_any_pymavlink_program_can_use_the_dialect_by_name():
     assert out.stdout.split() == ["pymavlink.dialects.v20.returnlink", "True"]
 
 
+@pytest.mark.interop
 def test_mavsdk_mavlink_direct_loads_the_xml():
     """The real MAVSDK (native library) must accept the dialect XML: connect it to a loopback heartbeat."""
     from mavsdk import ComponentType, Configuration, Mavsdk

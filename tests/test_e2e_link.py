@@ -16,6 +16,8 @@ from sim.runner import Run
 from sim.scenario import load
 from vehicle.app import DT
 
+pytestmark = pytest.mark.slow
+
 
 def variant(tmp: Path, base: str, name: str, edits: dict[str, str]) -> Path:
     """A built-in scenario with text replaced (each edit must apply exactly once)."""

@@ -18,6 +18,8 @@ from sim.scenario import BUILTIN, load
 from vehicle.app import DT
 from vehicle.lease import Holder
 
+pytestmark = pytest.mark.slow
+
 
 @functools.cache
 def run(name: str, vehicle: str, seed: int | None = None) -> tuple[Run, dict]:

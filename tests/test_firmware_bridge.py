@@ -19,6 +19,8 @@ from sim.firmware.bridge import (
     state_reply,
 )
 
+pytestmark = pytest.mark.firmware
+
 
 def packet(count: int, pwm=(1500,) * 16, rate: int = 200, magic: int = MAGIC) -> bytes:
     return SERVO_PACKET.pack(magic, rate, count, *pwm)

@@ -18,16 +18,18 @@ from link.linkmap_format import decode
 from sim.campaign.spec import SpecError, load_spec, parse_spec
 from sim.cli import main
 from sim.firmware import companion_metrics
-from sim.firmware.companion import CompanionRun
+from sim.firmware.companion import CompanionRun, firmware_run
 from sim.firmware.companion_operator import CompanionOperator
 from sim.firmware.metrics import differing
 from sim.firmware.process import INSTANCE_ENV, MAX_INSTANCE, FirmwareError, claim_instance
-from sim.firmware.run import FirmwareRun, firmware_params, firmware_run
+from sim.firmware.run import FirmwareRun, firmware_params
 from sim.policies import flies
 from sim.scenario import load
 from tests.firmware_helpers import firmware_or_skip, short_scenario
 from vehicle.companion.setup import check
 from vehicle.companion.setup import differing as needs_differing
+
+pytestmark = pytest.mark.firmware
 
 ROOT = Path(__file__).resolve().parents[1]
 # s: the tunnel's link dies near 44 s, the return brings it back near 53 s and the operator takes over at 54 s and

@@ -16,6 +16,8 @@ from sim.firmware import process
 from sim.firmware.locate import ENV, FirmwareNotFound, find_firmware
 from sim.firmware.process import FirmwareProcess, claim_instance, wait_for
 
+pytestmark = pytest.mark.firmware
+
 
 def executable(path, body="#!/bin/sh\nexit 0\n"):
     path.write_text(body)

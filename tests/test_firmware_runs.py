@@ -29,6 +29,8 @@ from sim.firmware.run import FirmwareRun
 from sim.scenario import load
 from tests.firmware_helpers import firmware_or_skip, short_scenario
 
+pytestmark = pytest.mark.firmware
+
 ROOT = Path(__file__).resolve().parents[1]
 
 

@@ -8,6 +8,7 @@ import socket
 import threading
 import time
 
+import pytest
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from gcs.station import GroundStation, mav
@@ -16,6 +17,8 @@ from sim.firmware.serve import FirmwareServer
 from sim.scenario import load
 from tests.firmware_helpers import firmware_or_skip
 from vehicle.companion.router import COMPANION_COMPID
+
+pytestmark = pytest.mark.firmware
 
 
 def test_a_plain_ground_station_hears_and_commands_the_served_firmware():

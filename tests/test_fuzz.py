@@ -3,7 +3,11 @@ failure reproduces. ``make fuzz`` runs a longer one (tests/fuzz_main.py)."""
 
 from __future__ import annotations
 
+import pytest
+
 from tests.fuzzing import MESSAGES, Fuzzer
+
+pytestmark = pytest.mark.slow
 
 FRAMES = 120_000
 SEED = 20260522

@@ -10,6 +10,8 @@ import pytest
 
 from tests.golden_runs import CASES, fingerprint, path_of
 
+pytestmark = pytest.mark.slow
+
 
 @pytest.mark.parametrize(("scenario", "vehicle", "seed", "duration"), CASES)
 def test_run_matches_its_golden_fingerprint(scenario, vehicle, seed, duration):

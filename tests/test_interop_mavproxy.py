@@ -12,6 +12,8 @@ from tests.interop import MAVProxy, ServedVehicle, wait_until
 from vehicle.app import State
 from vehicle.params import SPECS
 
+pytestmark = pytest.mark.interop
+
 PLAN = ("QGC WPL 110\n"
         "0\t1\t2\t44002\t30\t0\t-1\t-1\t0\t0\t0\t1\n"
         "1\t0\t2\t44003\t0\t0\t0\t0\t0\t0\t0\t1\n"

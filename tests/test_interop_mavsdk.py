@@ -19,6 +19,8 @@ from link import dialect
 from tests.interop import ServedVehicle, wait_until
 from vehicle.app import State
 
+pytestmark = pytest.mark.interop
+
 
 @pytest.fixture(scope="module")
 def flight():

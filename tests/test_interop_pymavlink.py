@@ -10,6 +10,8 @@ from pymavlink import mavutil
 from link import dialect
 from tests.interop import ServedVehicle, wait_until
 
+pytestmark = pytest.mark.interop
+
 
 def _station(port: int, sysid: int):
     conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=sysid, source_component=190,

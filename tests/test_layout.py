@@ -1,10 +1,14 @@
-"""The package boundaries of the layout: the onboard software runs without the simulator, and a ground station
-needs only the protocol in ``link/``, never the onboard package."""
+"""The package boundaries of the layout: the onboard software runs without the simulator, a ground station needs
+only the protocol in ``link/``, never the onboard package, and no two modules import each other. And the layout of
+the tests: each test file declares its own tier."""
 
 from __future__ import annotations
 
+import ast
+import re
 import subprocess
 import sys
+from pathlib import Path
 
 
 def _loaded_after_importing(modules: list[str]) -> set[str]:
@@ -26,3 +30,154 @@ def test_the_vehicle_runs_without_the_simulator():
     loaded = _loaded_after_importing(["vehicle.app", "vehicle.keystore", "vehicle.epochs",
                                       "vehicle.companion.app", "vehicle.companion.cli"])
     assert "vehicle" in loaded and "sim" not in loaded
+
+
+# ----- the import graph: no circles ---------------------------------------------------------------------------
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("vehicle", "link", "gcs", "sim")
+
+
+def _project_modules() -> dict[str, Path]:
+    """Every module of the four packages by its dotted name (a package by its own: ``vehicle.services``)."""
+    modules = {}
+    for package in PACKAGES:
+        for path in sorted((ROOT / package).rglob("*.py")):
+            parts = list(path.relative_to(ROOT).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts.pop()
+            modules[".".join(parts)] = path
+    return modules
+
+
+def _imports(module: str, source: str, is_package: bool, modules: dict[str, Path]) -> set[str]:
+    """The project modules that ``module`` (its text ``source``) imports, by every import statement in it."""
+    here = module.split(".") if is_package else module.split(".")[:-1]
+    names: list[str] = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            names += [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            parent = node.module or ""
+            if node.level:  # relative: from the package this file is in, one level up per further dot
+                parent = ".".join(here[:len(here) - (node.level - 1)] + ([node.module] if node.module else []))
+            # ``from vehicle import lease`` imports the module vehicle.lease when there is one, else the package
+            names += [f"{parent}.{alias.name}" if f"{parent}.{alias.name}" in modules else parent
+                      for alias in node.names]
+    found = set()
+    for name in names:
+        while name and name not in modules:  # ``import a.b.c`` where only a.b is a module of ours: a.b
+            name = name.rpartition(".")[0]
+        if name and name != module:
+            found.add(name)
+    return found
+
+
+def _import_graph() -> dict[str, set[str]]:
+    modules = _project_modules()
+    return {m: _imports(m, path.read_text(encoding="utf-8"), path.name == "__init__.py", modules)
+            for m, path in modules.items()}
+
+
+def _tangles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan's algorithm), each sorted: the modules
+    of one or more circles of imports. A graph without circles has none."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def _circle(graph: dict[str, set[str]], start: str) -> list[str]:
+    """A shortest circle of imports from ``start`` back to it (breadth first), e.g. ``[a, b, a]``; [] if none."""
+    came_from: dict[str, str] = {}
+    frontier = [start]
+    while frontier:
+        following = []
+        for v in frontier:
+            for w in sorted(graph[v]):
+                if w == start:
+                    way = [v]
+                    while way[-1] != start:
+                        way.append(came_from[way[-1]])
+                    return [*reversed(way), start]
+                if w not in came_from:
+                    came_from[w] = v
+                    following.append(w)
+        frontier = following
+    return []
+
+
+def test_no_two_modules_import_each_other_type_only_imports_included():
+    """docs/architecture.md §2: no circle in the import graph of vehicle/, link/, gcs/ and sim/.
+
+    Every import statement counts, wherever it stands: at the top, under ``if TYPE_CHECKING:``, inside a function,
+    a class or a ``try``; ``import x`` and ``from x import y`` alike, relative ones resolved. ``from vehicle import
+    lease`` imports the module vehicle.lease when that file exists, else the package vehicle; ``import a.b`` the
+    module a.b. Only the project's own modules are nodes. A failure lists each tangle's modules and one circle in it.
+    """
+    graph = _import_graph()
+    assert len(graph) > 100 and graph["vehicle.app"]  # the files were found and read
+    assert [(tangle, _circle(graph, tangle[0])) for tangle in _tangles(graph)] == []
+
+
+def test_the_import_graph_sees_type_only_local_and_relative_imports_and_finds_circles():
+    modules = _project_modules()
+    source = ("from typing import TYPE_CHECKING\n"
+              "if TYPE_CHECKING:\n    from vehicle.lease import LeaseBook\n"
+              "def f():\n    from vehicle import trail\n    import sim.runner\n"
+              "from . import returning\nfrom .services import base\nimport numpy\nfrom vehicle import State\n")
+    assert _imports("vehicle.app", source, False, modules) == {
+        "vehicle.lease", "vehicle.trail", "sim.runner", "vehicle.returning", "vehicle.services.base", "vehicle"}
+    graph = {"a": {"b"}, "b": {"c", "e"}, "c": {"a"}, "d": {"a"}, "e": set()}
+    assert _tangles(graph) == [["a", "b", "c"]] and _circle(graph, "a") == ["a", "b", "c", "a"]
+    assert _tangles({"a": {"b"}, "b": set()}) == [] and _circle({"a": {"b"}, "b": set()}, "a") == []
+
+
+# ----- the test tiers: declared in each test file -------------------------------------------------------------
+def test_conftest_names_no_test_file_and_no_test():
+    """A tier is a ``pytestmark`` in the test file or a mark on the test, never a list of names in conftest.py."""
+    text = (ROOT / "tests" / "conftest.py").read_text(encoding="utf-8")
+    assert re.findall(r"test_\w*", text) == []
+
+
+def test_every_firmware_test_file_is_marked_firmware():
+    """A test file with "firmware" in its name belongs to the firmware tier: its module-level ``pytestmark``
+    carries ``pytest.mark.firmware``."""
+    files = sorted((ROOT / "tests").glob("test_*firmware*.py"))
+    unmarked = []
+    for path in files:
+        marks = set()
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "pytestmark" for t in node.targets):
+                values = node.value.elts if isinstance(node.value, (ast.List, ast.Tuple)) else [node.value]
+                marks |= {ast.unparse(v) for v in values}
+        if "pytest.mark.firmware" not in marks:
+            unmarked.append(path.name)
+    assert files and unmarked == []

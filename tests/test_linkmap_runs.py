@@ -16,6 +16,8 @@ from sim.runner import Run
 from sim.scenario import load
 from vehicle.linkmap import MapConfig
 
+pytestmark = pytest.mark.slow
+
 
 def test_tunnel_linkmap_csv_is_good_near_the_station_and_dead_deep_in_the_tunnel(tmp_path):
     run = Run(load("tunnel"), "rover", 1).run()

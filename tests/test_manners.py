@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import struct
 
+import pytest
 from pymavlink.dialects.v20 import development as dev
 
 from link.ftp import ERR_FILE_NOT_FOUND
@@ -131,6 +132,7 @@ def test_lockstep_tlog_is_stamped_from_2026_plus_sim_time(tmp_path):
     assert stamps[-1] <= start + 4.0 + 1e-6 and stamps == sorted(stamps)
 
 
+@pytest.mark.interop
 def test_mavproxy_with_its_default_modules_gets_parameters_without_an_ftp_time_out(tmp_path):
     """MAVProxy's default module set includes ftp, and its param module asks for @PARAM/param.pck first."""
     from tests.interop import MAVProxy, ServedVehicle

@@ -17,6 +17,8 @@ from gcs.plans import parse_spec
 from gcs.track import LOST_GAP, MAX_POINTS, MIN_STEP, Track, return_route
 from tests.interop import ServedVehicle, wait_until
 
+pytestmark = pytest.mark.interop
+
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]

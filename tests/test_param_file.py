@@ -16,6 +16,8 @@ from link.storage import StoredFileError, remove_leftovers
 from sim.cli import main
 from vehicle.params import SPECS, read_parm_file
 
+pytestmark = pytest.mark.interop
+
 # Saves the parameter file as the endpoint does on every accepted PARAM_SET, as fast as it can, alternating
 # two values; prints "saved" once the first save is on disk.
 HAMMER = """

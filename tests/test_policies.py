@@ -23,6 +23,8 @@ from sim.runner import Run
 from sim.scenario import load
 from vehicle.app import DT, State
 
+pytestmark = pytest.mark.slow
+
 TUNNEL_S = 110.0  # the tunnel's link dies about 45 s in; a minute after is enough to see what each policy does
 
 

@@ -6,12 +6,15 @@ import subprocess
 import sys
 import time
 
+import pytest
 from pymavlink import mavutil
 
 from link.proxy import RadioProxy
 from link.radio import Radio, RadioParams
 from link.transports import UdpTransport
 from tests.interop import free_udp_port
+
+pytestmark = pytest.mark.interop
 
 
 def _drain(sock: UdpTransport, seconds: float) -> list[bytes]:

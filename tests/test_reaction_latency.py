@@ -10,6 +10,8 @@ from sim import metrics
 from sim.runner import Run
 from sim.scenario import load
 
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def culvert():

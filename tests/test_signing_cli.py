@@ -14,6 +14,8 @@ from sim.cli import main
 from tests.interop import ServedVehicle
 from vehicle.keystore import read_key, stamp_path, write_key
 
+pytestmark = pytest.mark.interop
+
 
 def test_keys_new_writes_a_private_random_key_and_never_overwrites(tmp_path, capsys):
     path = tmp_path / "v.key"

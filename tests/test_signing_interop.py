@@ -17,6 +17,8 @@ from vehicle.app import State
 from vehicle.keystore import write_key
 from vehicle.params import SPECS
 
+pytestmark = pytest.mark.interop
+
 PASSPHRASE = "adit-7-returnlink"
 
 

@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import time
 
+import pytest
+
 from link import dialect
 from link.transports import LockstepBus, UdpTransport
+
+pytestmark = pytest.mark.interop
 
 rl = dialect.load()
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import TYPE_CHECKING, Protocol
 
-from vehicle.lease import ExecutionLease, ExpireReason, ServiceBlock
+from vehicle.lease import ExecutionLease, ExpireReason, LeaseBook, Outcome, ServiceBlock
 from vehicle.lease_terms import State
 from vehicle.returning import Way
 from vehicle.service import NAV_LOITER_TIME, NAV_WAYPOINT, ServiceState
@@ -25,9 +25,36 @@ from vehicle.service import start as start_block
 from vehicle.service import step as step_block
 
 if TYPE_CHECKING:
-    from vehicle.app import Vehicle
+    from vehicle.clearance import FreeSpace
     from vehicle.estimator import Estimator
+    from vehicle.linkmap import LinkMap
+    from vehicle.params import Params
     from vehicle.trail import Trail
+
+
+class Onboard(Protocol):
+    """The vehicle as a return is driven on it: what ``ReturnDriver`` and an injected ``Contingency`` read and change
+    of it. ``vehicle.app.Vehicle`` is the vehicle; it is named here as a protocol, below it, so that the parts it
+    is made of (this module and ``vehicle.control``) do not import it back (docs/architecture.md §2)."""
+
+    params: Params
+    book: LeaseBook  # the current book: a transition replaces it, through ``apply`` or directly
+    contingency: Contingency | None  # None: the return plan's blocks drive
+    linkmap: LinkMap
+    notices: list[str]  # announced by the endpoint
+    armed: bool
+    home: tuple[float, float]
+    estimator: Estimator
+    trail: Trail
+
+    @property
+    def outbound_speed(self) -> float: ...
+
+    @property
+    def link_is_good(self) -> bool: ...
+
+    def apply(self, out: Outcome) -> None:
+        """Take the book a transition made, announce its events and execute the commands it released."""
 
 
 class Contingency(Protocol):
@@ -41,10 +68,10 @@ class Contingency(Protocol):
     halts_on_regain: bool  # False: LINK_REGAINED does not end the running block (it runs to its own end)
     holding: bool  # True while its rules keep the robot standing still (reported as HOLDING, not RETURNING)
 
-    def observe(self, vehicle: Vehicle, t: float) -> None:
+    def observe(self, vehicle: Onboard, t: float) -> None:
         """Every tick, after the estimator: a behaviour that keeps its own memory (SmartRTL's path) records."""
 
-    def drive(self, vehicle: Vehicle, t: float, x: float, y: float, yaw: float) -> tuple[float, float,
+    def drive(self, vehicle: Onboard, t: float, x: float, y: float, yaw: float) -> tuple[float, float,
                                                                                        ExpireReason | None]:
         """One tick of the current service lease: speed, yaw rate, and why the block ended (None: running)."""
 
@@ -61,7 +88,7 @@ class ReturnDriver:
     """Drives the current return-service lease: the plan's block through the auto-return service, or the
     injected contingency. Mutable: it holds the running block's service state between ticks."""
 
-    def __init__(self, vehicle: Vehicle) -> None:
+    def __init__(self, vehicle: Onboard) -> None:
         self.vehicle = vehicle  # its ``contingency`` (None: the plan's service) may be swapped between runs
         self.service: ServiceState | None = None  # the running block's state (None: no block started)
         self.index: int | None = None  # the lease index that state belongs to
@@ -77,8 +104,9 @@ class ReturnDriver:
         self.service, self.index = None, None
 
     def drive(self, t: float, cur: ExecutionLease, x: float, y: float, yaw: float, trail: Trail,
-              estimator: Estimator, outbound_speed: float) -> tuple[float, float]:
-        """One tick of ``cur``, the current return-service lease: speed and yaw rate."""
+              estimator: Estimator, outbound_speed: float, free: FreeSpace) -> tuple[float, float]:
+        """One tick of ``cur``, the current return-service lease: speed and yaw rate. ``free``: what the range
+        sensor saw free, the corners the return may cut."""
         v = self.vehicle
         if v.contingency is not None:
             return self._contingency(t, cur, x, y, yaw)
@@ -99,11 +127,11 @@ class ReturnDriver:
                 if self.way is not None and self.way_chain == cur.chain:
                     resume = self.way.resumed((x, y), self.way.length)
                 step = start_block(cur.block, x, y, t, trail, v.params, link_lost, outbound_speed, linkmap, resume,
-                                   free=v.control.free)
+                                   free=free)
             else:
                 step = step_block(self.service, x, y, yaw, t, trail, v.params, link_lost, outbound_speed,
                                   slipping=estimator.slipping, linkmap=linkmap, regaining=book.link.regaining(t),
-                                  free=v.control.free)
+                                  free=free)
         except Exception as e:  # noqa: BLE001 - the return runs when nobody can restart the vehicle
             return self._fault(cur.index, e, t)
         if fresh:

@@ -11,29 +11,42 @@ checked against the lease once more at the actuator; a return-service lease is d
 from __future__ import annotations
 
 from collections import deque
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from vehicle.clearance import FreeSpace
-from vehicle.contingency import ReturnDriver
+from vehicle.contingency import Onboard, ReturnDriver
 from vehicle.estimator import Estimator
-from vehicle.io import Readings
+from vehicle.io import Readings, RobotDriver
 from vehicle.lease import ExecutionLease, Holder, LeaseBook, Verdict
 from vehicle.linkmap import LinkMap, MapConfig
 from vehicle.teleop import Setpoint
 from vehicle.trail import Crumb, Trail, TrailConfig
-
-if TYPE_CHECKING:
-    from vehicle.app import Vehicle
 
 OUTBOUND_GAIN = 0.02  # per tick: how fast the remembered outbound speed follows the speed driven under teleop
 PACE_GAIN = 0.2  # per tick: the ground speed a crumb carries, smoothed over a few ticks (odometry noise, foot slip)
 OUTBOUND_MIN_STICK = 0.2  # m/s: slower setpoints (creeping, turning in place) do not teach the outbound speed
 
 
+class Ticking(Onboard, Protocol):
+    """The vehicle as its tick reads and changes it (``vehicle.app.Vehicle``, named here as a protocol so this
+    module does not import it back): what a return sees of it (``Onboard``), and the clock, the robot, the operator's
+    setpoint and the radio's report."""
+
+    t: float  # the time of the last tick
+    driver: RobotDriver
+    setpoint: Setpoint | None  # the operator's; None once it is stale or its lease is gone
+
+    def link_good(self, t: float) -> bool:
+        """The link tag of a crumb laid now."""
+
+    def rssi_at(self, t: float) -> float:
+        """The owner's signal at the robot now (dBm), nan when unknown."""
+
+
 class ControlLoop:
     """One vehicle's tick. Mutable: it is the shell around the estimator and the trail."""
 
-    def __init__(self, vehicle: Vehicle, returns: ReturnDriver, pose: tuple[float, float, float], t: float) -> None:
+    def __init__(self, vehicle: Ticking, returns: ReturnDriver, pose: tuple[float, float, float], t: float) -> None:
         x, y, yaw = pose
         self.vehicle = vehicle
         self.returns = returns
@@ -117,7 +130,7 @@ class ControlLoop:
             self.returns.stand_down()
             return self._teleop(t)
         self.vehicle.setpoint = None
-        return self.returns.drive(t, cur, x, y, yaw, self.trail, self.estimator, self.outbound_speed)
+        return self.returns.drive(t, cur, x, y, yaw, self.trail, self.estimator, self.outbound_speed, self.free)
 
     def _teleop(self, t: float) -> tuple[float, float]:
         """The operator's setpoint, if it is still alive and its lease is still the current one."""

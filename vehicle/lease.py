@@ -5,7 +5,8 @@
 plus what happened (``Outcome``). No clock, socket or MAVLink framing lives here, so the rules can be tested on
 their own and replayed from a journal. The book is the public face; each concept it holds has a file of its own:
 
-    lease_terms    the vocabulary: LeaseId, Holder, ExpireReason, LeaseEvent, Check, Outcome ...
+    lease_terms    the vocabulary: LeaseId, Holder, ExpireReason, LeaseEvent, Check, Outcome ..., and the book's
+                   state the rules read and return (BookState, LeaseConfig; LeaseBook adds the rules as methods)
     lease_guard    enforcement, the stale-command guard: the verdict on one command (§3.4)
     lease_root     the root lease: epochs, acquire, release, takeover and auto-grant rules (§3.1, §3.8)
     lease_ledger   the execution-lease sequence: claims, expiry triggers, re-arm, subleases (§3.2-§3.7)
@@ -19,20 +20,21 @@ Vocabulary (patent US 2022/0197292): ``[E]`` is the root lease with epoch E, ``[
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass, replace
+from typing import Any
 
-from link.parameters import default
 from vehicle import lease_guard, lease_journal, lease_ledger, lease_root
 from vehicle.frozen import evolve
 from vehicle.lease_guard import RETURN_IN_PROGRESS
 from vehicle.lease_root import epoch_before
 from vehicle.lease_terms import (
     NO_INDEX,
+    BookState,
     Check,
     ExecutionLease,
     ExpireReason,
     Holder,
+    LeaseConfig,
     LeaseEvent,
     LeaseId,
     LeaseState,
@@ -42,97 +44,21 @@ from vehicle.lease_terms import (
     ServiceBlock,
     Verdict,
 )
-from vehicle.link_watch import LinkWatch, Trigger, WatchConfig
-
-if TYPE_CHECKING:
-    from vehicle.params import Params
+from vehicle.link_watch import Trigger
 
 __all__ = [
-    "NO_INDEX", "RETURN_IN_PROGRESS", "Check", "ExecutionLease", "ExpireReason", "Holder", "LeaseBook",
+    "NO_INDEX", "RETURN_IN_PROGRESS", "BookState", "Check", "ExecutionLease", "ExpireReason", "Holder", "LeaseBook",
     "LeaseConfig", "LeaseEvent", "LeaseId", "LeaseState", "Outcome", "QueuedCommand", "RejectReason",
     "ServiceBlock", "Verdict", "epoch_before",
 ]
 
 
 @dataclass(frozen=True)
-class LeaseConfig:
-    """The parameters the rules depend on (LNK_*, RTL_REARM, LEASE_*); defaults from the parameter table."""
+class LeaseBook(BookState):
+    """The whole lease state of one vehicle (``BookState``: its fields and queries) with the rules as its methods.
+    Immutable; every method returns a new book."""
 
-    link_timeout: float = default("LNK_TIMEOUT")
-    regain_s: float = default("LNK_REGAIN_S")
-    contact_gap: float = default("LNK_GOOD_S")  # the longest gap between messages that still counts as contact
-    min_quality: float = default("LNK_MIN_Q")  # owner's delivery below this for link_timeout is lost too
-    rearm: bool = bool(default("RTL_REARM"))
-    autogrant: bool = bool(default("LEASE_AUTOGRANT"))
-    stale_take: bool = bool(default("LEASE_STALE_TAKE"))
-
-    @classmethod
-    def from_params(cls, params: Params) -> LeaseConfig:
-        return cls(link_timeout=params["LNK_TIMEOUT"], regain_s=params["LNK_REGAIN_S"],
-                   contact_gap=params["LNK_GOOD_S"], min_quality=params["LNK_MIN_Q"],
-                   rearm=bool(params["RTL_REARM"]), autogrant=bool(params["LEASE_AUTOGRANT"]),
-                   stale_take=bool(params["LEASE_STALE_TAKE"]))
-
-    @property
-    def watch(self) -> WatchConfig:
-        """The part of the configuration the owner's link watch works with."""
-        return WatchConfig(timeout=self.link_timeout, regain_s=self.regain_s, contact_gap=self.contact_gap,
-                           min_quality=self.min_quality)
-
-
-@dataclass(frozen=True)
-class LeaseBook:
-    """The whole lease state of one vehicle. Immutable; every method returns a new book."""
-
-    config: LeaseConfig = field(default_factory=LeaseConfig)
-    epoch: int | None = None
-    owner: int | None = None  # MAVLink sysid of the ground station holding the root
-    owner_compid: int = 0
-    leases: tuple[ExecutionLease, ...] = ()  # the live sequence; expired leases are dropped after their event
-    next_index: int = 0
-    chains: int = 0
-    plan: tuple[ServiceBlock, ...] = (ServiceBlock(),)
-    claims: tuple[tuple[int, LeaseId], ...] = ()  # (sysid, last lease it claimed)
-    queue: tuple[QueuedCommand, ...] = ()
-    link: LinkWatch = field(default_factory=LinkWatch)  # the owner's link (kept in step with ``config``)
-    last_reason: ExpireReason = ExpireReason.NONE
-    takeover_allowed: bool = False
-    last_epoch: int | None = None
-
-    # ----- queries -----------------------------------------------------------------------------------------
-    @property
-    def current(self) -> ExecutionLease | None:
-        return self.leases[0] if self.leases else None
-
-    @property
-    def current_id(self) -> LeaseId | None:
-        cur = self.current
-        return None if cur is None or self.epoch is None else LeaseId(self.epoch, (cur.index,))
-
-    @property
-    def scheduled(self) -> tuple[ExecutionLease, ...]:
-        return self.leases[1:]
-
-    @property
-    def returning(self) -> bool:
-        """A service block of the return plan holds the current lease: the return is running."""
-        return bool(self.leases) and self.leases[0].holder is Holder.RETURN_SERVICE
-
-    def lease(self, index: int) -> ExecutionLease | None:
-        for lease in self.leases:
-            if lease.index == index:
-                return lease
-        return None
-
-    def claimed_by(self, sysid: int) -> LeaseId | None:
-        for s, lid in self.claims:
-            if s == sysid:
-                return lid
-        return None
-
-    def link_up(self) -> bool:
-        return self.owner is not None and not self.link.lost
-
+    # ----- queries (the rest: ``BookState``) ---------------------------------------------------------------
     def owner_stale(self, t: float) -> bool:
         return lease_root.owner_stale(self, t)
 

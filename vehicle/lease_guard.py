@@ -8,17 +8,12 @@ for every command and the vehicle loop for every teleop setpoint it is about to 
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
-from vehicle.lease_terms import Check, Holder, LeaseId, RejectReason, Verdict, refused
-
-if TYPE_CHECKING:
-    from vehicle.lease import LeaseBook
+from vehicle.lease_terms import BookState, Check, Holder, LeaseId, RejectReason, Verdict, refused
 
 RETURN_IN_PROGRESS = "return in progress"  # why a takeover (or a stranger's command) is refused during a return
 
 
-def check(book: LeaseBook, sender: int, claim: LeaseId | None = None) -> Check:
+def check(book: BookState, sender: int, claim: LeaseId | None = None) -> Check:
     """Verdict for a state-changing command from ``sender`` carrying ``claim``.
 
     ``claim`` None means a standard message with no lease field: it is checked against the lease the sender last

@@ -7,16 +7,22 @@ included), so a restored book judges the link exactly as the saved one would hav
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from vehicle.lease_terms import ExecutionLease, ExpireReason, Holder, LeaseId, LeaseState, QueuedCommand, ServiceBlock
+from vehicle.lease_terms import (
+    BookState,
+    ExecutionLease,
+    ExpireReason,
+    Holder,
+    LeaseId,
+    LeaseState,
+    QueuedCommand,
+    ServiceBlock,
+)
 from vehicle.link_watch import Delivery, LinkWatch, WatchConfig
 
-if TYPE_CHECKING:
-    from vehicle.lease import LeaseBook
 
-
-def snapshot(book: LeaseBook) -> dict[str, Any]:
+def snapshot(book: BookState) -> dict[str, Any]:
     """A JSON-able picture of the book."""
 
     def lease(x: ExecutionLease) -> dict[str, Any]:

@@ -14,10 +14,12 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import replace
-from typing import TYPE_CHECKING
 
+from vehicle import lease_guard
 from vehicle.lease_terms import (
     NO_INDEX,
+    Book,
+    BookState,
     Check,
     ExecutionLease,
     ExpireReason,
@@ -34,14 +36,11 @@ from vehicle.lease_terms import (
 )
 from vehicle.link_watch import LinkWatch, Trigger
 
-if TYPE_CHECKING:
-    from vehicle.lease import LeaseBook
-
 SERVICE_ENDINGS = (ExpireReason.COMPLETED, ExpireReason.TIMEOUT, ExpireReason.STUCK)
 
 
 # ----- the operator's transitions ------------------------------------------------------------------------------
-def claim(book: LeaseBook, sysid: int, epoch: int, index: int, t: float) -> tuple[Outcome, Check]:
+def claim(book: BookState, sysid: int, epoch: int, index: int, t: float) -> tuple[Outcome, Check]:
     """MAV_CMD_LEASE_CLAIM: -1 claims the current unclaimed operator lease ("resume by incrementing the lease");
     any other index claims the next free index at or above it (NEWER_LEASE)."""
     if book.owner is None or sysid != book.owner:
@@ -67,9 +66,9 @@ def claim(book: LeaseBook, sysid: int, epoch: int, index: int, t: float) -> tupl
     return Outcome(arm(new, t), (event,), dropped=book.queue), Check(Verdict.EXECUTE, lid)
 
 
-def expire(book: LeaseBook, sysid: int, epoch: int, index: int, t: float) -> tuple[Outcome, Check]:
+def expire(book: BookState, sysid: int, epoch: int, index: int, t: float) -> tuple[Outcome, Check]:
     """MAV_CMD_LEASE_EXPIRE (or RTL): the explicit OPERATOR_EXPIRE trigger of the current lease."""
-    chk = book.check(sysid, LeaseId(epoch, (index,)))
+    chk = lease_guard.check(book, sysid, LeaseId(epoch, (index,)))
     if chk.verdict is Verdict.QUEUE:
         chk = refused(RejectReason.INVALID, "only the current lease can be expired", chk.lease)
     if not chk.executes and not (chk.reason is RejectReason.EXPIRED and _is_unclaimed_current(book, index)):
@@ -77,7 +76,7 @@ def expire(book: LeaseBook, sysid: int, epoch: int, index: int, t: float) -> tup
     return advance(book, t, ExpireReason.OPERATOR_EXPIRE), Check(Verdict.EXECUTE, chk.lease)
 
 
-def expire_current(book: LeaseBook, sysid: int, t: float) -> tuple[Outcome, Check]:
+def expire_current(book: BookState, sysid: int, t: float) -> tuple[Outcome, Check]:
     """RTL button / RTL mode from a plain client: expire whatever the owner currently holds."""
     if book.owner is None or sysid != book.owner:
         return Outcome(book), refused(RejectReason.NOT_IN_CONTROL, "not the owner")
@@ -87,7 +86,7 @@ def expire_current(book: LeaseBook, sysid: int, t: float) -> tuple[Outcome, Chec
 
 
 # ----- the return service's transitions ------------------------------------------------------------------------
-def finish(book: LeaseBook, index: int, reason: ExpireReason, t: float) -> Outcome:
+def finish(book: BookState, index: int, reason: ExpireReason, t: float) -> Outcome:
     """The auto-return service reports that its block ended: COMPLETED, TIMEOUT or STUCK."""
     if reason not in SERVICE_ENDINGS:
         raise ValueError(f"{reason.name} is not a service completion")
@@ -97,7 +96,7 @@ def finish(book: LeaseBook, index: int, reason: ExpireReason, t: float) -> Outco
     return advance(book, t, reason)
 
 
-def issue_sublease(book: LeaseBook, parent: LeaseId) -> tuple[LeaseBook, LeaseId]:
+def issue_sublease(book: Book, parent: LeaseId) -> tuple[Book, LeaseId]:
     """Divide the current lease: the new sublease supersedes every older one under ``parent`` (§3.3)."""
     cur = book.current
     if cur is None or parent.epoch != book.epoch or not parent.path or parent.path[0] != cur.index:
@@ -110,7 +109,7 @@ def issue_sublease(book: LeaseBook, parent: LeaseId) -> tuple[LeaseBook, LeaseId
     return replace(book, leases=leases), child
 
 
-def schedule_plan(book: LeaseBook, plan: Iterable[ServiceBlock], t: float, store: bool = True) -> Outcome:
+def schedule_plan(book: BookState, plan: Iterable[ServiceBlock], t: float, store: bool = True) -> Outcome:
     """Schedule a return plan behind the current operator lease. ``store`` (a mission upload) also makes it the
     plan re-armed from now on; without it (a one-off return, a plan started mid-way) the stored plan stays the one
     re-armed afterwards."""
@@ -125,13 +124,13 @@ def schedule_plan(book: LeaseBook, plan: Iterable[ServiceBlock], t: float, store
     return Outcome(arm(new, t, force=True, plan=plan), dropped=gone)
 
 
-def enqueue(book: LeaseBook, command: QueuedCommand) -> LeaseBook:
+def enqueue(book: Book, command: QueuedCommand) -> Book:
     """Hold a command sent under a scheduled lease until that lease becomes current."""
     return replace(book, queue=(*book.queue, command))
 
 
 # ----- the owner's link --------------------------------------------------------------------------------------
-def on_link(book: LeaseBook, link: LinkWatch, trigger: Trigger, t: float, place_holds: bool = True) -> Outcome:
+def on_link(book: BookState, link: LinkWatch, trigger: Trigger, t: float, place_holds: bool = True) -> Outcome:
     """Consume a trigger of the owner's link watch (§3.5): LOST expires a current operator lease (COMMS_LOST);
     REGAINED ends a service block that halts on regain and the rest of its chain (LINK_REGAINED), and otherwise
     re-arms the plan behind the operator lease now that the link is up again.
@@ -152,7 +151,7 @@ def on_link(book: LeaseBook, link: LinkWatch, trigger: Trigger, t: float, place_
     return Outcome(arm(new, t))
 
 
-def regained_here(book: LeaseBook, t: float) -> Outcome:
+def regained_here(book: BookState, t: float) -> Outcome:
     """LINK_REGAINED, deferred by ``on_link`` to a place the map vouches for: the current halting block and its
     chain end now, if the link is still up (lost again, the next regain decides afresh)."""
     cur = book.leases[0] if book.leases else None
@@ -163,7 +162,7 @@ def regained_here(book: LeaseBook, t: float) -> Outcome:
 
 
 # ----- how the sequence moves on -------------------------------------------------------------------------------
-def advance(book: LeaseBook, t: float, reason: ExpireReason) -> Outcome:
+def advance(book: BookState, t: float, reason: ExpireReason) -> Outcome:
     """The current lease expires; the next scheduled one (or a fresh unclaimed operator lease) is current, the
     commands queued under it are released, and those under leases now behind it are dropped."""
     cur = book.leases[0]
@@ -184,7 +183,7 @@ def advance(book: LeaseBook, t: float, reason: ExpireReason) -> Outcome:
     return Outcome(arm(new, t), (event,), released, dropped)
 
 
-def _end_chain(book: LeaseBook, t: float, reason: ExpireReason) -> Outcome:
+def _end_chain(book: BookState, t: float, reason: ExpireReason) -> Outcome:
     """LINK_REGAINED: the current block and the rest of its contingency chain expire together."""
     chain = book.leases[0].chain
     rest = tuple(lease for lease in book.leases[1:] if lease.chain != chain or lease.holder is Holder.OPERATOR)
@@ -196,7 +195,7 @@ def _end_chain(book: LeaseBook, t: float, reason: ExpireReason) -> Outcome:
     return out._replace(dropped=dropped + out.dropped)
 
 
-def arm(book: LeaseBook, t: float, force: bool = False, plan: tuple[ServiceBlock, ...] | None = None) -> LeaseBook:
+def arm(book: Book, t: float, force: bool = False, plan: tuple[ServiceBlock, ...] | None = None) -> Book:
     """Re-arm (§3.7): behind a current operator lease, with the link up, schedule the return plan (``plan``, or
     the stored one). Without RTL_REARM only the first operator lease of a root is armed, unless ``force``d."""
     plan = book.plan if plan is None else plan
@@ -215,7 +214,7 @@ def arm(book: LeaseBook, t: float, force: bool = False, plan: tuple[ServiceBlock
     return replace(book, leases=(cur, *blocks), next_index=book.next_index + len(blocks), chains=chain)
 
 
-def _is_unclaimed_current(book: LeaseBook, index: int) -> bool:
+def _is_unclaimed_current(book: BookState, index: int) -> bool:
     cur = book.current
     return cur is not None and cur.index == index and cur.holder is Holder.OPERATOR and not cur.claimed
 

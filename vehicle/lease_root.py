@@ -10,15 +10,20 @@ Every function takes the book and the time and returns a new book; none keeps st
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import TYPE_CHECKING
 
 from vehicle.lease_guard import RETURN_IN_PROGRESS
 from vehicle.lease_ledger import arm
-from vehicle.lease_terms import ExecutionLease, ExpireReason, Holder, LeaseEvent, LeaseId, LeaseState, Outcome
+from vehicle.lease_terms import (
+    BookState,
+    ExecutionLease,
+    ExpireReason,
+    Holder,
+    LeaseEvent,
+    LeaseId,
+    LeaseState,
+    Outcome,
+)
 from vehicle.link_watch import EPS, LinkWatch
-
-if TYPE_CHECKING:
-    from vehicle.lease import LeaseBook
 
 
 def epoch_after(previous: int | None, seed: int) -> int:
@@ -42,7 +47,7 @@ def epoch_before(epoch: int) -> int:
     return (epoch - 2) % 0xFFFF + 1
 
 
-def acquire(book: LeaseBook, sysid: int, compid: int, t: float, seed: int = 0,
+def acquire(book: BookState, sysid: int, compid: int, t: float, seed: int = 0,
             allow_takeover: bool = False) -> Outcome:
     """A ground station takes the root: a fresh epoch E and the operator lease [E,0] (§3.1)."""
     had_owner = book.owner is not None
@@ -61,7 +66,7 @@ def acquire(book: LeaseBook, sysid: int, compid: int, t: float, seed: int = 0,
     return Outcome(arm(new, t), (event,), dropped=dropped)
 
 
-def release(book: LeaseBook, sysid: int, t: float) -> Outcome:
+def release(book: BookState, sysid: int, t: float) -> Outcome:
     """The owner gives the vehicle up: every lease expires and nobody owns it."""
     if sysid != book.owner:
         return Outcome(book)
@@ -72,13 +77,13 @@ def release(book: LeaseBook, sysid: int, t: float) -> Outcome:
     return Outcome(new, (event,), dropped=book.queue)
 
 
-def owner_stale(book: LeaseBook, t: float) -> bool:
+def owner_stale(book: BookState, t: float) -> bool:
     """The owner has been silent for LNK_TIMEOUT (or never heard): a stale owner may be taken over."""
     age = book.link.age(t)
     return age is None or age >= book.config.link_timeout - EPS
 
 
-def take_refusal(book: LeaseBook, sysid: int, t: float) -> str | None:
+def take_refusal(book: BookState, sysid: int, t: float) -> str | None:
     """Why ``sysid`` may not take the root now, or None if it may (unowned, its own, allowed takeover, or a stale
     owner).
 
@@ -94,7 +99,7 @@ def take_refusal(book: LeaseBook, sysid: int, t: float) -> str | None:
     return f"owned by GCS {book.owner}; takeover not allowed"
 
 
-def admit(book: LeaseBook, sender: int, compid: int, t: float, seed: int = 0) -> Outcome:
+def admit(book: BookState, sender: int, compid: int, t: float, seed: int = 0) -> Outcome:
     """Plain clients (§3.8): a state-changing command from a ground station that may take the vehicle implicitly
     acquires the root when auto-grant is on. Returns the book unchanged otherwise. An explicit allow-takeover is
     for REQUEST_OPERATOR_CONTROL only: a stream of commands never takes over."""

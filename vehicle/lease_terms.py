@@ -2,8 +2,10 @@
 
 Plain immutable values and no rules: the ledger (``lease_ledger``), the root rules (``lease_root``) and the
 stale-command guard (``lease_guard``) all speak this vocabulary, and so do the endpoint, the telemetry and the
-simulator. ``Holder``, ``ExpireReason`` and the vehicle's ``State`` mirror enums of the dialect
-(LEASE_HOLDER, LEASE_EXPIRE_REASON, RETURNLINK_STATE); ``tests/test_dialect.py`` ties them by name and value.
+simulator. The book's state the rules read and return (``BookState``, with its ``LeaseConfig``) is such a value
+too; ``vehicle.lease.LeaseBook`` adds the rules to it. ``Holder``, ``ExpireReason`` and the vehicle's ``State``
+mirror enums of the dialect (LEASE_HOLDER, LEASE_EXPIRE_REASON, RETURNLINK_STATE); ``tests/test_dialect.py`` ties
+them by name and value.
 
 Vocabulary (patent US 2022/0197292): ``[E]`` is the root lease with epoch E, ``[E,i]`` execution lease i, and
 ``[E,i,j,...]`` its subleases. The *current* execution lease is the lowest-index lease that has not expired.
@@ -12,14 +14,15 @@ Vocabulary (patent US 2022/0197292): ``[E]`` is the root lease with epoch E, ``[
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, NamedTuple
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, NamedTuple, TypeVar
 
+from link.parameters import default
 from link.wire import NO_INDEX  # noqa: F401 - the lease vocabulary's "no lease", re-exported for its readers
+from vehicle.link_watch import LinkWatch, WatchConfig
 
 if TYPE_CHECKING:
-    from vehicle.lease import LeaseBook
-
+    from vehicle.params import Params
 
 
 class Holder(enum.IntEnum):
@@ -199,7 +202,91 @@ class Outcome(NamedTuple):
     A named tuple, so a caller may unpack it (``book, events, released, dropped = out``) or read it by name, and
     ``_replace`` adds to what a transition dropped."""
 
-    book: LeaseBook
+    book: BookState  # the new book: of the class of the one the transition was given (a ``LeaseBook``)
     events: tuple[LeaseEvent, ...] = ()
     released: tuple[QueuedCommand, ...] = ()
     dropped: tuple[QueuedCommand, ...] = ()
+
+
+@dataclass(frozen=True)
+class LeaseConfig:
+    """The parameters the rules depend on (LNK_*, RTL_REARM, LEASE_*); defaults from the parameter table."""
+
+    link_timeout: float = default("LNK_TIMEOUT")
+    regain_s: float = default("LNK_REGAIN_S")
+    contact_gap: float = default("LNK_GOOD_S")  # the longest gap between messages that still counts as contact
+    min_quality: float = default("LNK_MIN_Q")  # owner's delivery below this for link_timeout is lost too
+    rearm: bool = bool(default("RTL_REARM"))
+    autogrant: bool = bool(default("LEASE_AUTOGRANT"))
+    stale_take: bool = bool(default("LEASE_STALE_TAKE"))
+
+    @classmethod
+    def from_params(cls, params: Params) -> LeaseConfig:
+        return cls(link_timeout=params["LNK_TIMEOUT"], regain_s=params["LNK_REGAIN_S"],
+                   contact_gap=params["LNK_GOOD_S"], min_quality=params["LNK_MIN_Q"],
+                   rearm=bool(params["RTL_REARM"]), autogrant=bool(params["LEASE_AUTOGRANT"]),
+                   stale_take=bool(params["LEASE_STALE_TAKE"]))
+
+    @property
+    def watch(self) -> WatchConfig:
+        """The part of the configuration the owner's link watch works with."""
+        return WatchConfig(timeout=self.link_timeout, regain_s=self.regain_s, contact_gap=self.contact_gap,
+                           min_quality=self.min_quality)
+
+
+@dataclass(frozen=True)
+class BookState:
+    """What the lease book holds, and the queries that only read it: the value every rule (``lease_guard``,
+    ``lease_root``, ``lease_ledger``, ``lease_journal``) takes and returns. ``vehicle.lease.LeaseBook`` is this value
+    with the rules as its methods; declared here, below the rules, so that no rule imports the book that calls it."""
+
+    config: LeaseConfig = field(default_factory=LeaseConfig)
+    epoch: int | None = None
+    owner: int | None = None  # MAVLink sysid of the ground station holding the root
+    owner_compid: int = 0
+    leases: tuple[ExecutionLease, ...] = ()  # the live sequence; expired leases are dropped after their event
+    next_index: int = 0
+    chains: int = 0
+    plan: tuple[ServiceBlock, ...] = (ServiceBlock(),)
+    claims: tuple[tuple[int, LeaseId], ...] = ()  # (sysid, last lease it claimed)
+    queue: tuple[QueuedCommand, ...] = ()
+    link: LinkWatch = field(default_factory=LinkWatch)  # the owner's link (kept in step with ``config``)
+    last_reason: ExpireReason = ExpireReason.NONE
+    takeover_allowed: bool = False
+    last_epoch: int | None = None
+
+    @property
+    def current(self) -> ExecutionLease | None:
+        return self.leases[0] if self.leases else None
+
+    @property
+    def current_id(self) -> LeaseId | None:
+        cur = self.current
+        return None if cur is None or self.epoch is None else LeaseId(self.epoch, (cur.index,))
+
+    @property
+    def scheduled(self) -> tuple[ExecutionLease, ...]:
+        return self.leases[1:]
+
+    @property
+    def returning(self) -> bool:
+        """A service block of the return plan holds the current lease: the return is running."""
+        return bool(self.leases) and self.leases[0].holder is Holder.RETURN_SERVICE
+
+    def lease(self, index: int) -> ExecutionLease | None:
+        for lease in self.leases:
+            if lease.index == index:
+                return lease
+        return None
+
+    def claimed_by(self, sysid: int) -> LeaseId | None:
+        for s, lid in self.claims:
+            if s == sysid:
+                return lid
+        return None
+
+    def link_up(self) -> bool:
+        return self.owner is not None and not self.link.lost
+
+
+Book = TypeVar("Book", bound=BookState)  # a rule returning the book it was given, changed: of its class (LeaseBook)

@@ -91,8 +91,8 @@ def simulate(trial: Trial, progress: bool = False):
     from sim import outputs
 
     if trial.vehicle == FIRMWARE_VEHICLE:
+        from sim.firmware.companion import firmware_run
         from sim.firmware.locate import find_firmware
-        from sim.firmware.run import firmware_run
 
         run = firmware_run(scenario_of(trial), trial.seed, trial.policy, find_firmware(trial.firmware or None),
                            progress=progress).run()

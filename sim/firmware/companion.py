@@ -181,3 +181,11 @@ class CompanionRun(LeaseRecord, FirmwareRun):
         if self.vehicle is not None:
             self._close_block()
         return self
+
+
+def firmware_run(scenario: Scenario, seed: int | None, policy: str, firmware: Path, **options) -> FirmwareRun:
+    """The run that flies ``policy`` on the firmware: its own failsafe (``FirmwareRun``), or returnlink companion
+    beside it (``CompanionRun``). Here, not in ``sim.firmware.run``: the one module that knows both classes."""
+    if policy == COMPANION_POLICY:
+        return CompanionRun(scenario, seed, firmware=firmware, **options)
+    return FirmwareRun(scenario, seed, policy, firmware, **options)

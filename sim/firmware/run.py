@@ -91,7 +91,7 @@ class FirmwareRun:
 
     kind = "ardurover"
     speedup = SPEEDUP  # the firmware's own pace; lockstep runs leave the pace to the bridge
-    policies: tuple[str, ...] = FAILSAFE_POLICIES  # what this class flies (``firmware_run`` picks the class)
+    policies: tuple[str, ...] = FAILSAFE_POLICIES  # what this class flies (``companion.firmware_run`` picks)
 
     def __init__(self, scenario: Scenario, seed: int | None = None, policy: str = "ardupilot-smartrtl",
                  firmware: Path | None = None, progress: bool = False, duration: float | None = None,
@@ -301,13 +301,4 @@ class FirmwareRun:
         return row[1], row[2]
 
 
-def firmware_run(scenario: Scenario, seed: int | None, policy: str, firmware: Path, **options) -> FirmwareRun:
-    """The run that flies ``policy`` on the firmware: its own failsafe, or returnlink companion beside it."""
-    if policy == COMPANION_POLICY:
-        from sim.firmware.companion import CompanionRun  # (built on this module)
-
-        return CompanionRun(scenario, seed, firmware=firmware, **options)
-    return FirmwareRun(scenario, seed, policy, firmware, **options)
-
-
-__all__ = ["FS_ACTION", "FirmwareRun", "MODE_NAMES", "firmware_params", "firmware_run"]
+__all__ = ["FS_ACTION", "FirmwareRun", "MODE_NAMES", "firmware_params"]

@@ -21,9 +21,8 @@ from link import dialect
 from link.mission import Origin
 from link.wire import NO_INDEX
 
-if TYPE_CHECKING:  # (the services import this module: these are types only)
+if TYPE_CHECKING:  # (a type only)
     from vehicle.app import Vehicle
-    from vehicle.services.signing import Signing
 
 mav = dialect.load()
 
@@ -95,12 +94,15 @@ class Counters:
 @dataclass(frozen=True)
 class Parts:
     """What a composition's services are built from (``vehicle.endpoint.Endpoint`` hands it to its factory): the
-    vehicle, the component's voice and counters, the signing service its gate uses, and the component's settings."""
+    vehicle, the component's voice and counters, the signing service its gate uses, and the component's settings.
+
+    The signing service is one of the composition's services to a factory (it ticks and answers SETUP_SIGNING like
+    the others); only the endpoint, which built it, uses it as the gate (``vehicle.services.signing.Signing``)."""
 
     vehicle: Vehicle
     out: Outbox
     counters: Counters
-    signing: Signing
+    signing: Service
     sysid: int
     compid: int
     origin: Origin
