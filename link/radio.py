@@ -157,7 +157,10 @@ class Radio:
         loss += self.attenuation(antenna, robot)
         rssi = power_dbm - loss + self._shadowing(*robot)
         snr_margin = rssi - max(self.p.sensitivity_dbm, self.p.noise_floor_dbm + 5.0)
-        delivery = 1.0 / (1.0 + math.exp(-snr_margin / max(1e-6, self.p.fade_width_db / 4.0)))
+        # (the exponent clamped: behind a few rock walls the margin is hundreds of dB down, and exp overflows; past
+        # +-700 the delivery is 0 or 1 to the last bit anyway)
+        z = min(700.0, max(-700.0, -snr_margin / max(1e-6, self.p.fade_width_db / 4.0)))
+        delivery = 1.0 / (1.0 + math.exp(z))
         return LinkState(rssi, self.p.noise_floor_dbm, delivery)
 
     def _fate_key(self, name: str) -> bytes:

@@ -28,6 +28,15 @@ def test_distance_and_walls_reduce_rssi_and_delivery():
     assert abs((near.rssi_dbm - walled.rssi_dbm) - 30.0) < 1e-9
 
 
+def test_a_place_behind_hundreds_of_db_of_rock_is_dead_not_a_crash():
+    # generated mine worlds put several 30-60 dB walls between a station and the end of a drift; the delivery's
+    # logistic overflowed math.exp there and took the run down
+    radio = Radio(RadioParams(shadowing_db=0.0), lambda a, b: 900.0, seed=1)
+    assert radio.link((0, 0), 20.0, (10.0, 0.0)).delivery < 1e-300
+    gain = Radio(RadioParams(shadowing_db=0.0), lambda a, b: -900.0, seed=1)
+    assert gain.link((0, 0), 20.0, (10.0, 0.0)).delivery == 1.0
+
+
 def test_tunnel_bend_kills_the_link():
     s = scenario.load("tunnel")
     world = s.world()
