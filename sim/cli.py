@@ -29,14 +29,24 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def _scenario(name: str):
-    from sim.scenario import ScenarioError, load
+def _scenario(name: str, seed: int | None = None):
+    """The scenario (a generated one drawn from ``seed``, saying how many draws were redrawn); exit 2 if bad."""
+    return _scenario_world(name, seed)[0]
+
+
+def _scenario_world(name: str, seed: int | None, announce: bool = True):
+    from sim.scenario import ScenarioError
+    from sim.worlds.resolve import load
 
     try:
-        return load(name)
+        sc, redraws = load(name, seed)
     except (ScenarioError, OSError, UnicodeDecodeError) as e:
         print(f"returnlink: error: {e}", file=sys.stderr)
         raise SystemExit(2) from None
+    if redraws is not None and announce:
+        print(f"returnlink: generated {sc.name} from seed {sc.seed} ({redraws} draw{'' if redraws == 1 else 's'} "
+              "redrawn)", file=sys.stderr)
+    return sc, redraws
 
 
 def _fail(message: str) -> SystemExit:
@@ -104,12 +114,12 @@ def _cmd_sim_run(args: argparse.Namespace) -> int:
         return _cmd_sim_replay(args)
     if args.scenario is None:
         return _usage_error("sim run needs a SCENARIO (or --replay DIR TRIAL)")
-    sc = _run_overrides(_scenario(args.scenario), args)
+    sc = _run_overrides(_scenario(args.scenario, args.seed), args)
     kind = args.vehicle or sc.vehicle
     policy = _policy_for(args, kind)
     firmware = _firmware(args.firmware) if kind == FIRMWARE_VEHICLE else None
     seed = sc.seed if args.seed is None else args.seed
-    out = Path(args.out) if args.out else Path("out") / f"{sc.name}-{kind}-{seed}"
+    out = Path(args.out) if args.out else Path("out") / f"{sc.name.replace(':', '-')}-{kind}-{seed}"
     _writable_dir(out)
     print(f"returnlink: running {sc.name} with the {kind} (seed {seed}, policy {policy}), "
           f"{sc.duration:g} simulated s", file=sys.stderr)
@@ -445,7 +455,7 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
     from sim.policies import FIRMWARE_VEHICLE
     from sim.serve import Server
 
-    sc = _scenario(args.scenario)
+    sc = _scenario(args.scenario, args.seed)
     if args.vehicle == FIRMWARE_VEHICLE:
         return _cmd_sim_serve_firmware(args, sc)
     if args.policy or args.firmware:
@@ -486,6 +496,42 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_sim_world(args: argparse.Namespace) -> int:
+    """`sim world`: a scenario's map (world.png) and the world as an ordinary scenario file (world.toml)."""
+    from link.storage import write_atomic
+    from sim.worlds.check import check
+    from sim.worlds.render import render
+    from sim.worlds.toml_out import to_toml
+
+    sc, redraws = _scenario_world(args.scenario, args.seed, announce=False)
+    out = Path(args.out)
+    _writable_dir(out)
+    verdict = check(sc)
+    try:
+        write_atomic(out / "world.toml", to_toml(sc).encode("utf-8"))
+        png = render(sc, out / "world.png", verdict)
+    except OSError as e:
+        raise _fail(f"cannot write the world to {out}: {e}") from None
+    drawn = "not generated" if redraws is None else f"{redraws} draw{'' if redraws == 1 else 's'} redrawn"
+    print(f"returnlink: {sc.name}, seed {sc.seed}: {drawn}")
+    print(f"  {sc.description}")
+    print(f"  route {verdict.clearance_m:.2f} m from the nearest wall; link {verdict.start_margin_db:.1f} dB over "
+          f"the threshold at the start, " + ("dies at " + ", ".join(f"{c:.1f}" for c in verdict.dead_at)
+                                             if verdict.dead_at else "never dies") + " (north, east; mean radio)")
+    for problem in verdict.problems:  # a generated world never has one; a hand-drawn one may
+        print(f"  fails the generated worlds' validity check: {problem}")
+    print(f"  wrote {png}, {out / 'world.toml'}")
+    return 0
+
+
+def _add_world_parser(sim) -> None:
+    w = sim.add_parser("world", help="draw a scenario's map and write it out as a scenario file (gen:KIND too)")
+    w.add_argument("scenario", help="a built-in scenario, gen:office, gen:mine, gen:culvert, or a .toml file")
+    w.add_argument("--seed", type=types.SEED, help="the seed that picks a generated world (default: the scenario's)")
+    w.add_argument("--out", required=True, help="directory for world.png and world.toml")
+    w.set_defaults(func=_cmd_sim_world)
+
+
 def _cmd_keys(args: argparse.Namespace) -> int:
     from link.signing import Key
     from vehicle.keystore import write_key
@@ -519,7 +565,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo.set_defaults(func=_cmd_demo)
     sim = sub.add_parser("sim", help="the simulator").add_subparsers(dest="sim_command", required=True)
     run = sim.add_parser("run", help="run a scenario in lockstep, as fast as possible")
-    run.add_argument("scenario", nargs="?", help="a built-in scenario name or a .toml file")
+    run.add_argument("scenario", nargs="?", help="a built-in scenario name, gen:KIND (a world generated from the "
+                                                "seed: gen:office, gen:mine, gen:culvert) or a .toml file")
     run.add_argument("--seed", type=types.SEED, help="random seed (default: the scenario's)")
     run.add_argument("--vehicle", choices=["rover", "legged", "ardurover"],
                      help="robot model (default: the scenario's); ardurover: the scenario's rover driven by the real "
@@ -535,8 +582,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run_campaign_options(run)
     run.set_defaults(func=_cmd_sim_run)
     _add_sweep_parser(sim)
+    _add_world_parser(sim)
     serve = sim.add_parser("serve", help="run a scenario in real time over UDP for MAVSDK, MAVProxy, QGC")
-    serve.add_argument("scenario", help="a built-in scenario name or a .toml file")
+    serve.add_argument("scenario", help="a built-in scenario name, gen:KIND (drawn from --seed) or a .toml file")
     serve.add_argument("--vehicle", choices=["rover", "legged", "ardurover"],
                        help="robot model (default: the scenario's); ardurover: the real ArduPilot firmware")
     serve.add_argument("--policy", choices=(*FAILSAFE_POLICIES, COMPANION_POLICY),

@@ -3,6 +3,11 @@
 Every error names the file, the line and the field, because a scenario is written by hand: an unknown key
 (with the closest known one), NaN or infinity anywhere, a value out of its range, a vehicle parameter the vehicle
 would refuse. A misspelt key silently ignored is a scenario that does not test what its author thinks it tests.
+
+A file may instead hold ``[generate]`` (docs/architecture.md §7.1): a world family's ``kind`` and size fields, the
+world drawn from the run's seed. This module reads and range-checks that table (``read_generate``) with the same
+errors; the families and the drawing are ``sim.worlds``'s, which imports this module (``sim.worlds.resolve`` loads
+any name).
 """
 
 from __future__ import annotations
@@ -48,6 +53,8 @@ POWER_STEP_DB = STATION_POWER_DBM[1] - STATION_POWER_DBM[0]  # the largest chang
 PLAN_KEYS = {NAV_RETURN_TO_LINK: {"max_displacement": 1, "speed": 2, "target": 3, "on_regain": 4},
              NAV_LOITER_TIME: {"time": 1}, NAV_WAYPOINT: {"x": 5, "y": 6}}
 SEED_MAX = 2**32 - 1
+# what a file with [generate] may hold beside it: the rest of the scenario is generated with the world
+GENERATE_KEYS = ("name", "description", "duration", "seed", "vehicle", "generate")
 
 
 class ScenarioError(ValueError):
@@ -248,12 +255,10 @@ class _Reader:
 
 def parse(text: str, file: str = "<scenario>") -> Scenario:
     """A scenario from TOML text; ScenarioError (file, line, field) for anything wrong. One part per table."""
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        m = re.search(r"line (\d+)", str(e))
-        raise ScenarioError(file, int(m.group(1)) if m else None, "", f"not valid TOML: {e}") from None
-    r = _Reader(file, text)
+    raw, r = _load_toml(text, file)
+    if "generate" in raw:
+        raise ScenarioError(file, _header_line(r, "generate"), "generate", "a generated world: read it with "
+                            "sim.worlds.resolve (returnlink sim run, sim world and sim sweep do)")
     r.known(raw, "", ("name", "description", "duration", "seed", "vehicle", "world", "radio", "start", "operator",
                       "events", "criteria"))
     r.finite(raw, "")
@@ -273,6 +278,21 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
         radio=_radio(r, raw), start=_start(r, raw), **op, events=_events(r, raw, stations),
         criteria=_criteria(r, raw),
     )
+
+
+def _load_toml(text: str, file: str) -> tuple[dict, _Reader]:
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        m = re.search(r"line (\d+)", str(e))
+        raise ScenarioError(file, int(m.group(1)) if m else None, "", f"not valid TOML: {e}") from None
+    return raw, _Reader(file, text)
+
+
+def _header_line(r: _Reader, table: str) -> int | None:
+    """The line of ``[table]`` (or ``[[table]]``, ``[table.x]``)."""
+    header = re.compile(rf"^\s*\[+\s*{re.escape(table)}\s*[.\]]")
+    return next((i + 1 for i, ln in enumerate(r.lines) if header.match(ln)), None)
 
 
 def _world(r: _Reader, raw: dict) -> tuple[tuple[float, ...], tuple[Wall, ...], tuple, tuple[Station, ...]]:
@@ -453,12 +473,70 @@ def _param(r: _Reader, name: str, value: float, path: str) -> float:
         raise r.fail(path, str(e)) from None
 
 
-def load(name_or_path: str) -> Scenario:
-    """A built-in scenario by name, or a TOML file by path."""
+@dataclass(frozen=True)
+class Generate:
+    """A file's ``[generate]`` table, checked: the family, its size fields given, and what the file sets on top of
+    the generated scenario (None: the generator's own)."""
+
+    file: str
+    line: int | None  # of the [generate] table, for errors found later (no valid draw)
+    kind: str
+    sizes: dict[str, int]
+    seed: int  # the file's own; a run's --seed draws another world
+    vehicle: str
+    name: str | None = None
+    description: str | None = None
+    duration: float | None = None
+
+
+def read_generate(text: str, file: str, families: dict[str, dict[str, tuple[int, int]]]) -> Generate | None:
+    """The ``[generate]`` table of a scenario file, every field checked against ``families`` (kind -> size field
+    -> (lowest, highest)) by file, line and field; None for an ordinary scenario file."""
+    raw, r = _load_toml(text, file)
+    if "generate" not in raw:
+        return None
+    for k in raw:
+        if k not in GENERATE_KEYS and k in ("world", "radio", "start", "operator", "events", "criteria"):
+            raise ScenarioError(file, _header_line(r, k) or r.line_of(k), k, "is generated with the world in a file "
+                                "with [generate]; write the world out with `returnlink sim world FILE --out DIR` "
+                                "and edit DIR/world.toml")
+    r.known(raw, "", GENERATE_KEYS)
+    r.finite(raw, "")
+    gen = r.get(raw, "generate", "generate", dict)
+    kind = r.get(gen, "kind", "generate.kind", str)
+    if kind not in families:
+        raise r.fail("generate.kind", f"unknown world family {kind!r} (one of {', '.join(families)})")
+    r.known(gen, "generate", ("kind", *families[kind]))
+    sizes = {}
+    for name, (lo, hi) in families[kind].items():
+        if name in gen:
+            sizes[name] = r.get(gen, name, f"generate.{name}", int)
+            if not lo <= sizes[name] <= hi:
+                raise r.fail(f"generate.{name}", f"must be within {lo}..{hi}, got {sizes[name]}")
+    vehicle = r.get(raw, "vehicle", "vehicle", str, "rover")
+    if vehicle not in ("rover", "legged"):
+        raise r.fail("vehicle", f"must be rover or legged, got {vehicle!r}")
+    seed = r.get(raw, "seed", "seed", int, 1)
+    if not 0 <= seed <= SEED_MAX:
+        raise r.fail("seed", f"must be within 0..{SEED_MAX}, got {seed}")
+    duration = r.number(raw, "duration", "duration", None, lo=1.0, hi=36000.0)
+    return Generate(file, _header_line(r, "generate"), kind, sizes, seed, vehicle,
+                    r.get(raw, "name", "name", str, None), r.get(raw, "description", "description", str, None),
+                    duration)
+
+
+def scenario_source(name_or_path: str) -> tuple[str, str]:
+    """(file name, text) of a built-in scenario by name, or of a TOML file by path."""
     if name_or_path in BUILTIN:
         text = resources.files("sim.scenarios").joinpath(f"{name_or_path}.toml").read_text(encoding="utf-8")
-        return parse(text, f"{name_or_path}.toml")
+        return f"{name_or_path}.toml", text
     path = Path(name_or_path)
     if not path.is_file():
         raise ScenarioError(str(path), None, "", f"no such scenario file (built-in: {', '.join(BUILTIN)})")
-    return parse(path.read_text(encoding="utf-8"), str(path))
+    return str(path), path.read_text(encoding="utf-8")
+
+
+def load(name_or_path: str) -> Scenario:
+    """A built-in scenario by name, or a TOML file by path."""
+    file, text = scenario_source(name_or_path)
+    return parse(text, file)

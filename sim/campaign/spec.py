@@ -1,7 +1,7 @@
 """Campaign specs (TOML) -> the list of trials, checked whole before any trial runs.
 
 ```toml
-scenarios = ["tunnel", "warehouse", "my_site.toml"]   # built-in names, or files relative to this spec
+scenarios = ["tunnel", "warehouse", "my_site.toml"]   # built-in names, gen:KIND, or files relative to this spec
 vehicles = ["rover", "legged"]                        # default: each scenario's own robot
 seeds = {from = 1, to = 20}                           # or a list; both ends included
 policies = ["returnlink", "hold"]                     # default: ["returnlink"]
@@ -13,8 +13,11 @@ power_dbm = [-20.0, 0.0, 20.0]                        # the operator station's t
 exponent = [2.0, 2.5]
 ```
 
-Trials are the cartesian product. A spec is written by hand and a campaign may run for hours, so every mistake is
-found up front and named by file, line and field, like a scenario file's (``SpecError``, exit code 2).
+Trials are the cartesian product. A generated world (``gen:office``, or a file with ``[generate]``) is drawn
+from each trial's seed, one world per seed, and the trial carries that world written out as a scenario file, so its
+id hashes the world itself and a resumed campaign finds it again. A spec is written by hand and a campaign may run
+for hours, so every mistake is found up front and named by file, line and field, like a scenario file's
+(``SpecError``, exit code 2).
 """
 
 from __future__ import annotations
@@ -30,7 +33,8 @@ from typing import Any
 
 from sim.campaign.trial import RADIO_AXES, RADIO_PREFIX, Trial
 from sim.policies import DEFAULT_POLICY, FIRMWARE_VEHICLE, POLICY_NAMES, flies
-from sim.scenario import BUILTIN, ScenarioError, parse
+from sim.scenario import BUILTIN, ScenarioError
+from sim.worlds.resolve import PREFIX, generator_text, parse, world_text
 from vehicle.params import BY_NAME, ParamError, validate
 
 if sys.version_info >= (3, 11):
@@ -113,6 +117,11 @@ def _scenario_text(r: _Lines, spec_dir: Path, name: str, fld: str) -> tuple[str,
     if name in BUILTIN:
         text = resources.files("sim.scenarios").joinpath(f"{name}.toml").read_text(encoding="utf-8")
         source = f"{name}.toml"
+    elif name.startswith(PREFIX):
+        try:
+            text, source = generator_text(name), name
+        except ScenarioError as e:
+            raise r.fail(fld, f"scenario {name!r} is broken: {e}") from None
     else:
         path = Path(name) if Path(name).is_absolute() else spec_dir / name
         try:
@@ -122,7 +131,7 @@ def _scenario_text(r: _Lines, spec_dir: Path, name: str, fld: str) -> tuple[str,
                               f"{getattr(e, 'strerror', None) or e} (built-in: {', '.join(BUILTIN)})") from None
         source = str(path)
     try:
-        sc = parse(text, source)
+        sc, _ = parse(text, source)
     except ScenarioError as e:
         raise r.fail(fld, f"scenario {name!r} is broken: {e}") from None
     return sc.name, source, text
@@ -230,7 +239,7 @@ def parse_spec(text: str, file: str = "<spec>", spec_dir: Path | None = None) ->
     # the grid pairs each policy with the vehicles that can fly it (the firmware's failsafes with the firmware, the
     # native policies with the native robots), so one spec compares both; a policy no listed vehicle flies is an
     # error, as is a vehicle no listed policy suits
-    listed = vehicles or [parse(text_, source).vehicle for _, source, text_ in scenarios]
+    listed = vehicles or [parse(text_, source)[0].vehicle for _, source, text_ in scenarios]
     for k, p in enumerate(policies):
         if not any(flies(p, veh) for veh in listed):
             need = f"vehicle {FIRMWARE_VEHICLE!r}" if not flies(p, "rover") else "a native vehicle (rover, legged)"
@@ -246,15 +255,21 @@ def parse_spec(text: str, file: str = "<spec>", spec_dir: Path | None = None) ->
     if n > MAX_TRIALS:
         raise r.fail("scenarios", f"the grid has {n} trials, more than {MAX_TRIALS}")
     trials: dict[str, Trial] = {}
-    for name, source, text_ in scenarios:
-        own = parse(text_, source)
+    for k, (name, source, text_) in enumerate(scenarios):
+        own, generated = parse(text_, source)
+        flown = {}  # seed -> the scenario text it flies: a generated world is drawn once per seed
         for veh in vehicles or [own.vehicle]:
             for seed in seeds or [own.seed]:
+                if seed not in flown:
+                    try:
+                        flown[seed] = text_ if generated is None else world_text(text_, source, seed)
+                    except ScenarioError as e:
+                        raise r.fail(f"scenarios[{k}]", f"scenario {name!r}, seed {seed}: {e}") from None
                 for combo in combos:
                     for policy in policies:
                         if not flies(policy, veh):
                             continue
-                        t = Trial(name, source, text_, veh, seed, tuple(sorted(combo)), policy)
+                        t = Trial(name, source, flown[seed], veh, seed, tuple(sorted(combo)), policy)
                         trials.setdefault(t.id, t)
     return Spec(file, tuple(trials.values()), float(timeout))
 
