@@ -9,6 +9,9 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # beside this checkout, if any (none: the firmware tests skip and say so; .ci/run always sets it)
 RETURNLINK_ARDUROVER ?= $(abspath $(wildcard ../shared/ardupilot/ardurover))
 export RETURNLINK_ARDUROVER
+# the PX4 rover SITL (bin/px4 and etc/) for the PX4 tests, the same way: RETURNLINK_PX4, else ../shared/px4
+RETURNLINK_PX4 ?= $(abspath $(wildcard ../shared/px4))
+export RETURNLINK_PX4
 
 .PHONY: demo test test-fast bench fuzz lint venv clean
 
