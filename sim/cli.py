@@ -123,19 +123,18 @@ def _cmd_sim_run(args: argparse.Namespace) -> int:
     _writable_dir(out)
     print(f"returnlink: running {sc.name} with the {kind} (seed {seed}, policy {policy}), "
           f"{sc.duration:g} simulated s", file=sys.stderr)
-    if firmware is None:
-        from sim.runner import Run
+    from sim.runner import Run
 
+    if firmware is None:
         run = Run(sc, kind, seed, progress=not args.quiet, policy=policy).run()
     else:
-        from sim.firmware.companion import firmware_run
         from sim.firmware.process import FirmwareError, stop_on_terminate
 
         print(f"returnlink: firmware {firmware}", file=sys.stderr)
         try:
             with stop_on_terminate():
-                run = firmware_run(sc, seed, policy, firmware, progress=not args.quiet,
-                                   log_path=out / "firmware.log").run()
+                run = Run(sc, kind, seed, progress=not args.quiet, policy=policy, firmware=firmware,
+                          log_path=out / "firmware.log").run()
         except FirmwareError as e:
             print(f"returnlink: the firmware failed: {e}", file=sys.stderr)
             return 1

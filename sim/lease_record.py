@@ -1,12 +1,13 @@
 """What a run keeps of the onboard lease machinery as it runs, for the §7 metrics and the plots: the link losses
-and regains the vehicle declared, and one record per return block. The native runner (``sim.runner.Run``) and a run
-of returnlink companion beside the firmware (``sim.firmware.companion.CompanionRun``) fly the same ``Vehicle``, so
-they keep the same record and ``sim.metrics`` reads both.
+and regains the vehicle declared, and one record per return block. Every plant that flies returnlink's ``Vehicle``
+(natively, ``sim.plants.native``, or as the companion beside the firmware, ``sim.plants.companion``) keeps the same
+record, and ``sim.metrics`` reads it.
 
-A mixin, because both runs own the loop and the record is a few calls inside it: ``_vehicle_state(v)`` before the
-vehicle's tick and ``_vehicle_ticked(v, t, before)`` after it, ``_track_block(v, t, pos, cur, returning)`` once a
-tick after the per-tick row was appended to ``self._rows`` (rows start with t, true x, true y), ``_close_block``
-when the run ends. The host provides ``vehicle``, ``world``, ``t``, ``frame_offset`` and ``_rows``.
+A mixin of the one loop (``sim.runner.Run``), because the record is a few calls inside its tick:
+``_vehicle_state(v)`` before the vehicle's tick and ``_vehicle_ticked(v, t, before)`` after it,
+``_track_block(v, t, pos, cur, returning)`` once a tick after the per-tick row was appended to ``self._rows`` (rows
+start with t, true x, true y, est x, est y), ``_close_block`` when the run ends. The host provides ``vehicle``,
+``world``, ``t``, ``policy``, ``frame_offset`` and ``_rows``.
 """
 
 from __future__ import annotations
@@ -56,7 +57,7 @@ class LeaseRecord:
         self.blocks: list[BlockRecord] = []
         self.link_backs: list[tuple[float, float | None]] = []  # (link regained, start of the contact run)
         self.regains: list[tuple[float, float | None]] = []  # (LINK_REGAINED time, start of the contact run)
-        self.audit_stale = 0  # actuations the runner's own audit found outside the announced current lease
+        self.stale_setpoints = 0  # teleop setpoints the run's own audit found outside the announced current lease
         self.announced: tuple[int, int | None] | None = None  # (epoch, current index) from LEASE_EVENTs
         self.losses: list[tuple[float, float | None]] = []  # (COMMS_LOST time, owner last heard before it)
         # when each loss's trigger condition became true: LNK_TIMEOUT after the owner was last heard (silence), or

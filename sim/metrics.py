@@ -1,5 +1,10 @@
 """The figures of one run (docs/architecture.md §7: the keys of metrics.json are a contract) and the scenario's verdict.
 
+One pipeline for every plant (``compute``): the run's own figures (who flew what, for how long, how fast), the
+§7 figures only the plant's record can give (``Plant.figures``: from the lease record for a plant that flies
+returnlink's leases, ``lease_figures``; from its mode timeline for the firmware alone, ``sim.firmware.metrics``),
+any keys of the plant's own after them (the firmware's version and modes), and one verdict over them (``verdict``).
+
 Positions are compared in one frame, the true one (the simulator's ground truth): the loss and rest positions,
 distances and displacements, and the return target, which the vehicle chose in its estimate frame, is taken as
 where the robot truly was when it laid that crumb. ``frames`` in metrics.json says this per key.
@@ -11,7 +16,6 @@ import math
 
 import numpy as np
 
-from sim.runner import Run
 from vehicle.app import DT, State
 from vehicle.link_watch import GOOD_QUALITY as GOOD_LINK_QUALITY
 
@@ -29,7 +33,9 @@ REGAIN_MOVED_M = 0.5  # m an operator must have moved the robot after the return
 DISPLACEMENT_SLACK = 0.5  # m of path-tracking overshoot tolerated at the displacement circle
 
 
-def _r(x: float | None, nd: int = 3) -> float | None:
+def rounded(x: float | None, nd: int = 3) -> float | None:
+    """A figure as metrics.json holds it: rounded to ``nd`` decimals, None when there is none (or it is not finite,
+    which JSON cannot hold)."""
     return None if x is None or not math.isfinite(x) else round(float(x), nd)
 
 
@@ -51,8 +57,24 @@ def path_deviation(path: np.ndarray, poly: np.ndarray) -> float:
     return worst
 
 
-def compute(run: Run) -> dict:
-    v, sc, tr = run.vehicle, run.scenario, run.trace
+def compute(run) -> dict:
+    """metrics.json of a finished ``sim.runner.Run``, whatever its plant: ``KEYS`` in order (each figure the plant
+    does not give is a KeyError here, not a silent gap), then the plant's own keys, then the verdict."""
+    figures = run.plant.figures(run)
+    own = {"scenario": run.scenario.name, "vehicle": run.kind, "seed": run.seed, "sim_duration_s": rounded(run.t, 2),
+           "real_time_factor": rounded(run.t / run.wall if run.wall > 0 else None, 1), "passed": True,
+           "failures": [], "policy": run.policy}
+    m = {k: own[k] if k in own else figures.pop(k) for k in KEYS}
+    m.update(figures)
+    m["failures"] = verdict(run, m, leases=run.plant.leases)
+    m["passed"] = not m["failures"]
+    return m
+
+
+def lease_figures(run) -> dict:
+    """The §7 figures of a run whose plant flies returnlink's vehicle (natively, or as the companion beside the
+    firmware), from the run's lease record (``sim.lease_record``) and the vehicle's own counters."""
+    v, tr = run.vehicle, run.trace
     events = run.lease_events
     first_return = next((e.t for e in v.event_log if e.current is not None and _holder_is_service(e)), None)
     lost = run.losses[0] if run.losses else None
@@ -93,32 +115,27 @@ def compute(run: Run) -> dict:
     poly = np.vstack([v.trail.points(), [[v.estimator.pose.x, v.estimator.pose.y]]]) + np.asarray(run.frame_offset)
     deviation = path_deviation(est[::5], poly)
     m = {
-        "scenario": sc.name, "vehicle": run.kind, "seed": run.seed, "sim_duration_s": _r(run.t, 2),
-        "link_lost_s": _r(lost[1] if lost else None), "return_started_s": _r(first_return),
-        "reaction_latency_s": _r(reaction, 4), "link_regained_s": _r(regained),
-        "distance_back_m": _r(distance_back, 2), "max_displacement_m": _r(max_disp, 2),
-        "final_target_error_m": _r(final_err, 2), "collisions": run.world.collisions,
+        "link_lost_s": rounded(lost[1] if lost else None), "return_started_s": rounded(first_return),
+        "reaction_latency_s": rounded(reaction, 4), "link_regained_s": rounded(regained),
+        "distance_back_m": rounded(distance_back, 2), "max_displacement_m": rounded(max_disp, 2),
+        "final_target_error_m": rounded(final_err, 2), "collisions": run.world.collisions,
         "stale_commands_executed": v.stale_commands_executed + run.audit_stale,
         "commands_rejected": v.commands_rejected,
-        "estimator_rmse_m": _r(rmse), "trail_points": v.trail.count, "trail_max_deviation_m": _r(deviation),
-        "real_time_factor": _r(run.t / run.wall if run.wall > 0 else None, 1), "lease_events": events,
+        "estimator_rmse_m": rounded(rmse), "trail_points": v.trail.count, "trail_max_deviation_m": rounded(deviation),
+        "lease_events": events,
     }
-    m["passed"], m["failures"] = True, []
     m.update(after_loss(run))
     m["frames"] = dict(FRAMES)
     m["relapses"] = relapses(run.vehicle.event_log, run.trace.state)
-    failures = verdict(run, m)
-    m["passed"] = not failures
-    m["failures"] = failures
-    assert tuple(m) == KEYS
     return m
 
 
-def _point(p: tuple[float, float] | None) -> list[float] | None:
+def point(p: tuple[float, float] | None) -> list[float] | None:
+    """A position as metrics.json holds it: [x, y] to the millimetre, None when there is none."""
     return None if p is None else [round(float(p[0]), 3), round(float(p[1]), 3)]
 
 
-def _first_chain_end(run: Run) -> tuple[float | None, int | None]:
+def _first_chain_end(run) -> tuple[float | None, int | None]:
     """When the return chain started by the first COMMS_LOST ended (an operator lease current again), and the
     tick index of that moment; (None, None) if it never ended or never started."""
     if not run.losses:
@@ -134,7 +151,7 @@ def _first_chain_end(run: Run) -> tuple[float | None, int | None]:
     return None, None
 
 
-def after_loss(run: Run) -> dict:
+def after_loss(run) -> dict:
     """The added §7 keys: what the first link loss did, and what the return made of it.
 
     - ``loss_position``: true position when the owner was last heard before the first COMMS_LOST (the same for
@@ -178,14 +195,16 @@ def after_loss(run: Run) -> dict:
                 moved = max((math.dist(tr.true[k], rest) for k in range(end_k, k_back + 1)), default=0.0)
                 regained_by = "operator" if moved > REGAIN_MOVED_M else "return"
     driving = sum(b.driving_s for b in run.blocks)
-    blocks = [{"index": b.index, "command": b.command, "start_s": _r(b.started), "end_s": _r(b.ended),
-               "reason": b.reason or None, "distance_m": _r(b.distance, 2), "displacement_m": _r(b.max_disp, 2),
-               "limit_m": _r(b.max_disp_allowed, 2)} for b in run.blocks]
+    blocks = [{"index": b.index, "command": b.command, "start_s": rounded(b.started), "end_s": rounded(b.ended),
+               "reason": b.reason or None, "distance_m": rounded(b.distance, 2),
+               "displacement_m": rounded(b.max_disp, 2), "limit_m": rounded(b.max_disp_allowed, 2)}
+              for b in run.blocks]
     return {
-        "policy": run.policy, "loss_position": _point(loss), "rest_position": _point(rest),
-        "rest_link_quality": _r(quality), "link_cycles": sum(1 for e in v.event_log if e.reason.name == "COMMS_LOST"),
+        "loss_position": point(loss), "rest_position": point(rest),
+        "rest_link_quality": rounded(quality),
+        "link_cycles": sum(1 for e in v.event_log if e.reason.name == "COMMS_LOST"),
         "regained_by": regained_by, "collisions_during_return": sum(b.collisions for b in run.blocks),
-        "return_speed_mps": _r(sum(b.distance for b in run.blocks) / driving if driving > 0 else None),
+        "return_speed_mps": rounded(sum(b.distance for b in run.blocks) / driving if driving > 0 else None),
         "blocks": blocks,
     }
 
@@ -208,38 +227,85 @@ def _holder_is_service(e) -> bool:
     return e.holder.name == "RETURN_SERVICE"
 
 
-def verdict(run: Run, m: dict) -> list[str]:
-    """The scenario's own success criteria, each failure said in words."""
-    c = run.scenario.criteria
-    out = []
-    if m["stale_commands_executed"]:
-        out.append(f"{m['stale_commands_executed']} stale commands executed")
-    if c.return_started is not None and (m["return_started_s"] is not None) != c.return_started:
-        out.append("no return started" if c.return_started else "a return started")
-    if c.link_regained is not None and (m["link_regained_s"] is not None) != c.link_regained:
-        out.append("link never regained after the loss" if c.link_regained else "link regained")
-    if c.max_final_target_error_m is not None and m["final_target_error_m"] is not None \
-            and m["final_target_error_m"] > c.max_final_target_error_m:
-        out.append(f"final target error {m['final_target_error_m']} m > {c.max_final_target_error_m} m")
+# The scenario's criteria as rules, in the order their failures are said. Each answers the failures it finds, in
+# words; a rule marked as needing leases judges returnlink's own machinery (the stale-command guard, its return
+# target, the displacement limit of a lease, the commands it rejects, the chain of return blocks), which a plant
+# without it (the ArduPilot firmware alone) does not have: for that plant the rule is not judged, rather than
+# failed on a figure that is null by nature.
+def _stale(c, m, run) -> list[str]:
+    n = m["stale_commands_executed"]
+    return [f"{n} stale commands executed"] if n else []
+
+
+def _return_started(c, m, run) -> list[str]:
+    if c.return_started is None or (m["return_started_s"] is not None) == c.return_started:
+        return []
+    return ["no return started" if c.return_started else "a return started"]
+
+
+def _link_regained(c, m, run) -> list[str]:
+    if c.link_regained is None or (m["link_regained_s"] is not None) == c.link_regained:
+        return []
+    return ["link never regained after the loss" if c.link_regained else "link regained"]
+
+
+def _target_error(c, m, run) -> list[str]:
+    err, limit = m["final_target_error_m"], c.max_final_target_error_m
+    return [f"final target error {err} m > {limit} m"] if limit is not None and err is not None and err > limit else []
+
+
+def _no_target(c, m, run) -> list[str]:
     if c.max_final_target_error_m is not None and m["final_target_error_m"] is None and c.return_started:
-        out.append("no return target to measure against")
-    if m["collisions"] > c.max_collisions:
-        out.append(f"{m['collisions']} collisions > {c.max_collisions}")
-    if c.max_displacement_respected:
-        for b in run.blocks:
-            if b.max_disp > b.max_disp_allowed + DISPLACEMENT_SLACK:
-                out.append(f"lease {b.index}: displacement {b.max_disp:.2f} m > limit {b.max_disp_allowed:.2f} m")
+        return ["no return target to measure against"]
+    return []
+
+
+def _collisions(c, m, run) -> list[str]:
+    return [f"{m['collisions']} collisions > {c.max_collisions}"] if m["collisions"] > c.max_collisions else []
+
+
+def _displacement(c, m, run) -> list[str]:
+    if not c.max_displacement_respected:
+        return []
+    return [f"lease {b.index}: displacement {b.max_disp:.2f} m > limit {b.max_disp_allowed:.2f} m"
+            for b in run.blocks if b.max_disp > b.max_disp_allowed + DISPLACEMENT_SLACK]
+
+
+def _distance_back(c, m, run) -> list[str]:
     if c.min_distance_back_m is not None and m["distance_back_m"] < c.min_distance_back_m:
-        out.append(f"distance back {m['distance_back_m']} m < {c.min_distance_back_m} m")
-    if m["commands_rejected"] < c.min_commands_rejected:
-        out.append(f"{m['commands_rejected']} commands rejected < {c.min_commands_rejected}")
+        return [f"distance back {m['distance_back_m']} m < {c.min_distance_back_m} m"]
+    return []
+
+
+def _rejected(c, m, run) -> list[str]:
+    n = m["commands_rejected"]
+    return [f"{n} commands rejected < {c.min_commands_rejected}"] if n < c.min_commands_rejected else []
+
+
+def _regained_by(c, m, run) -> list[str]:
     if c.regained_by is not None and m["regained_by"] != c.regained_by:
-        out.append(f"link regained by {m['regained_by']}, expected by {c.regained_by}")
-    if c.chain_reasons:
-        got = [b.reason for b in run.blocks]
-        if got[:len(c.chain_reasons)] != list(c.chain_reasons):
-            out.append(f"return blocks ended {got}, expected {list(c.chain_reasons)}")
-    return out
+        return [f"link regained by {m['regained_by']}, expected by {c.regained_by}"]
+    return []
+
+
+def _chain(c, m, run) -> list[str]:
+    got = [b.reason for b in run.blocks]
+    if c.chain_reasons and got[:len(c.chain_reasons)] != list(c.chain_reasons):
+        return [f"return blocks ended {got}, expected {list(c.chain_reasons)}"]
+    return []
+
+
+# (rule, needs returnlink's leases)
+RULES = ((_stale, True), (_return_started, False), (_link_regained, False), (_target_error, False),
+         (_no_target, True), (_collisions, False), (_displacement, True), (_distance_back, False),
+         (_rejected, True), (_regained_by, False), (_chain, True))
+
+
+def verdict(run, m: dict, leases: bool = True) -> list[str]:
+    """The scenario's own success criteria (``RULES``), each failure said in words; ``leases`` False: the plant
+    flies no lease machinery, and the rules about it are not judged."""
+    c = run.scenario.criteria
+    return [failure for rule, needs_leases in RULES if leases or not needs_leases for failure in rule(c, m, run)]
 
 
 def _reaction(latency: float | None) -> str:
@@ -250,7 +316,7 @@ def _reaction(latency: float | None) -> str:
     return f"reaction {latency:.3f} s after the trigger's condition (LNK_TIMEOUT of silence or LNK_MIN_Q)"
 
 
-def summary(run: Run, m: dict) -> str:
+def summary(run, m: dict) -> str:
     def f(x, unit="", nd=1):
         return "-" if x is None else f"{x:.{nd}f}{unit}"
 

@@ -1,37 +1,22 @@
-"""What every run leaves behind, whichever vehicle flew it: metrics.json, the operator's .tlog, the trajectory and
-timeline plots, and the printed summary. A native run (``sim.runner.Run``) and a firmware run
-(``sim.firmware.run.FirmwareRun``), and returnlink companion beside the firmware (``sim.firmware.companion``) each
-have their own metrics and plots; this is the one place that picks."""
+"""What every run leaves behind, whichever plant flew it: metrics.json, the operator's .tlog, the link map, the
+trajectory and timeline plots, and the printed summary. The metrics are one pipeline (``sim.metrics.compute``); the
+summary and the plots are the plant's (``Plant.summary``, ``Plant.report``): a firmware run has modes where a native
+one has leases."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 from link.linkmap_format import FILE_NAME
-
-
-def _modules(run):
-    from sim.firmware.run import FirmwareRun
-
-    if getattr(run, "companion", None) is not None:  # returnlink companion beside the firmware
-        from sim.firmware import companion_metrics
-
-        return companion_metrics, "sim.firmware.report"
-    if isinstance(run, FirmwareRun):
-        from sim.firmware import metrics
-
-        return metrics, "sim.firmware.report"
-    from sim import metrics
-
-    return metrics, "sim.report"
+from sim import metrics
 
 
 def compute(run) -> dict:
-    return _modules(run)[0].compute(run)
+    return metrics.compute(run)
 
 
 def summary(run, m: dict) -> str:
-    return _modules(run)[0].summary(run, m)
+    return run.plant.summary(run, m)
 
 
 def write_linkmap(run, path: Path) -> Path | None:
@@ -64,6 +49,6 @@ def write(run, out: Path, plots: bool = True) -> list[Path]:
         paths.append(linkmap)
     if plots:
         # matplotlib: about 0.4 CPU-s to import, paid only when plots are drawn
-        report = importlib.import_module(_modules(run)[1])
+        report = importlib.import_module(run.plant.report)
         paths += [report.trajectory(run, out / "trajectory.png"), report.timeline(run, out / "timeline.png")]
     return paths

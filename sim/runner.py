@@ -1,14 +1,17 @@
-"""``returnlink sim run``: one scenario in lockstep, as fast as the machine allows.
+"""``returnlink sim run``: one scenario in lockstep, as fast as the machine allows, whatever flies it.
 
-Every tick: radio deliveries due -> ground stations and vehicle parse real MAVLink bytes -> timed events and the
-scripted operator -> the vehicle loop -> physics -> every frame either side sent goes through the radio model
-(per-packet loss and latency, both directions) onto a lockstep bus. Nothing reads the wall clock except the
-real-time-factor figure, so the same scenario and seed give the same metrics.
+One loop for every plant (``sim.plants``: returnlink's vehicle on a pymunk robot, the ArduPilot firmware over its
+JSON backend, the firmware with returnlink companion beside it). Every tick: radio deliveries due -> ground
+stations parse real MAVLink bytes -> timed events and the scripted operator -> the plant hears what the radio
+delivered to it and ticks -> every frame either side sent goes through the radio model (per-packet loss and latency,
+both directions) onto a lockstep bus -> RADIO_STATUS -> the record. (The firmware hears and ticks after the
+stations' radio leg instead: ``Plant.hears_last``.) Nothing reads the wall clock except the real-time-factor
+figure, so the same scenario and seed give the same metrics.
 
 Every random draw comes from a stream of its own subsystem, derived from the seed by name (the robot, the
 sensors, the shadowing field, each direction of each station's radio link): a run flown under another link-loss
-policy (``policy=``, docs/architecture.md §9) sees the same world, noise and packet fates, and so the same trace, until
-the first COMMS_LOST, where only the policy differs.
+policy (``policy=``, docs/architecture.md §9), or by another plant, sees the same world, noise and packet fates,
+and so the same trace, until the first COMMS_LOST, where only the policy differs.
 """
 
 from __future__ import annotations
@@ -19,43 +22,45 @@ import math
 import struct
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
-from gcs.plans import from_plan_items
-from gcs.station import GroundStation
 from link.proxy import RadioReport
 from link.radio import LinkState, Radio
 from link.transports import LockstepBus
-from sim.driver import simulated_vehicle
 from sim.jams import Jams, radio_event
 from sim.lease_record import LeaseRecord
-from sim.operator import Operator
-from sim.policies import DEFAULT_POLICY, check_policy, make_policy
+from sim.plants import Plant
+from sim.plants.native import TICK_RATE, NativePlant
+from sim.policies import COMPANION_POLICY, DEFAULT_POLICY, FIRMWARE_VEHICLE
 from sim.scenario import Scenario
 from vehicle.app import DT
 from vehicle.lease import Holder
+from vehicle.lease_terms import State
 
 # A lockstep run has no wall-clock time of its own: its .tlog is stamped from 2026-01-01 00:00:00 UTC + sim time
 # (1970, the UNIX epoch itself, made MAVProxy and QGroundControl show a log from before MAVLink existed).
 TLOG_EPOCH_US = 1_767_225_600 * 1_000_000
 _TLOG_STAMP = struct.Struct(">Q").pack
-# Tick k is at k / TICK_RATE s: the double nearest k * DT, which is what rounding the running sum to 9 decimals
-# every tick gave (for DT = 1/50 s the sum strays from k / 50 by far less than 1e-9 for days of ticks), at the
-# cost of a division instead of a ``round``
-TICK_RATE = round(1 / DT)
+
 
 @dataclass
 class StationSim:
-    """One ground station in the simulation: its library instance, antenna and whether it is running."""
+    """One ground station in the simulation, whatever the plant: its antenna, whether it is running, its channel
+    this tick, the software it runs (``gs``: what it hears and sends, or None for a station nobody runs; the
+    scripted ``operator`` on it, or None) and whether its traffic goes to the .tlog (the operator's)."""
 
     name: str
-    gs: GroundStation
+    gs: Any
     antenna: tuple[float, float]
     power_dbm: float
     alive: bool
     state: LinkState | None = None
-    operator: Operator | None = None
+    operator: Any = None
+    logged: bool = False
     # the two directions of its radio link, named once: (source, destination) lane and fate stream
     down: tuple[tuple[str, str], str] = field(init=False)
     up: tuple[tuple[str, str], str] = field(init=False)
@@ -65,6 +70,36 @@ class StationSim:
     def __post_init__(self) -> None:
         self.down = (("vehicle", self.name), f"downlink.{self.name}")
         self.up = ((self.name, "vehicle"), f"uplink.{self.name}")
+
+
+@contextmanager
+def frozen() -> Iterator[None]:
+    """The objects alive before a run's loop (the libraries, the dialect, the scenario: some 80,000) frozen out of
+    garbage collection while it runs, as none of them becomes garbage there: a full collection during the run then
+    scans only what the run made, instead of spending tens of milliseconds on them each time. They are handed back
+    to the collector afterwards, unless the caller had frozen objects of its own."""
+    freeze = gc.get_freeze_count() == 0
+    if freeze:
+        gc.freeze()
+    try:
+        yield
+    finally:
+        if freeze:
+            gc.unfreeze()
+
+
+def plant_for(vehicle: str, policy: str) -> type:
+    """The plant that flies ``policy`` on ``vehicle``: the ArduPilot firmware's own failsafes, returnlink companion
+    beside it, or returnlink's own vehicle (each refuses a policy it cannot fly, saying why)."""
+    if vehicle != FIRMWARE_VEHICLE:
+        return NativePlant
+    if policy == COMPANION_POLICY:
+        from sim.plants.companion import CompanionPlant
+
+        return CompanionPlant
+    from sim.plants.firmware import FirmwarePlant
+
+    return FirmwarePlant
 
 
 def _column(name: str) -> property:
@@ -113,32 +148,37 @@ class Trace:
 
 
 class Run(LeaseRecord):
-    frame_offset = (0.0, 0.0)  # the vehicle's frame in the true one: the same, its estimator starts at its true pose
+    """One scenario flown by one plant (``plant``: chosen by ``plant_for`` from the vehicle and the policy, or
+    given; ``options`` go to it, e.g. the firmware's ``firmware=PATH`` and ``log_path``). ``run()`` flies it and
+    returns self; the record (``trace``, the lease record of ``sim.lease_record``, ``tlog``) and ``metrics`` are
+    read from it afterwards. ``step()`` moves a plant without a clock of its own (the native one) by one tick, for
+    tests that drive the ticks by hand."""
 
     def __init__(self, scenario: Scenario, vehicle: str | None = None, seed: int | None = None,
-                 progress: bool = False, duration: float | None = None, policy: str = DEFAULT_POLICY) -> None:
+                 progress: bool = False, duration: float | None = None, policy: str = DEFAULT_POLICY,
+                 plant: type | None = None, **options) -> None:
         self.scenario = sc = scenario
-        self.policy = check_policy(policy)
-        self.kind = vehicle or sc.vehicle
+        self.policy = policy
         self.seed = sc.seed if seed is None else seed
-        self.driver, self.vehicle, self.endpoint = simulated_vehicle(sc, self.kind, self.seed,
-                                                                     contingency=make_policy(self.policy))
-        self.world = self.driver.world
-        self.robot = self.driver.robot
+        kind = vehicle or sc.vehicle
+        self.plant: Plant = (plant or plant_for(kind, policy))(sc, kind, self.seed, policy, **options)
+        self.kind = self.plant.kind
+        self.world = self.plant.world
+        self.robot = self.plant.robot
+        self.frame_offset = self.plant.frame_offset
         self.radio = Radio(sc.radio, self.world.attenuation_db, self.seed)
         self.radio_report = RadioReport()
         self.bus = LockstepBus()
         self.stations: dict[str, StationSim] = {}
         for s in sc.stations:
-            gs = GroundStation(s.sysid, 190)
-            self.stations[s.name] = StationSim(s.name, gs, (s.x, s.y), s.power_dbm, s.name == sc.operator_station)
+            gs, operator = self.plant.station(s, s.name == sc.operator_station)
+            self.stations[s.name] = StationSim(s.name, gs, (s.x, s.y), s.power_dbm, s.name == sc.operator_station,
+                                               operator=operator, logged=s.name == sc.operator_station)
         self._station_list = list(self.stations.values())  # the tick walks it four times
         self._inbox = self.bus.inbox("vehicle")
         for st in self._station_list:
             st.inbox = self.bus.inbox(st.name)
-        self._operator = op = self.stations[sc.operator_station]
-        op.operator = Operator(op.gs, sc.route, sc.resume_route, from_plan_items(sc.plan), sc.teleop,
-                                   attempts=sc.attempts, rejoin=sc.rejoin)
+        self._operator = self.stations[sc.operator_station]
         self.events = sorted(sc.events, key=lambda e: e.t)
         self.jams = Jams()
         self.t = 0.0
@@ -146,97 +186,133 @@ class Run(LeaseRecord):
         self.duration = sc.duration if duration is None else duration
         self.trace = Trace()
         self.tlog: list[bytes] = []
+        self.notes: list[str] = []  # events that do not apply to the plant, said in the summary rather than faked
         self.progress = progress
         self.wall = 0.0
         self.stopped = False
         self.metrics: dict | None = None
         self.next_radio_status = 0.0
-        self._rows = self.trace.rows  # the record's view of the ticks (``sim.lease_record``)
+        # the record's view of the ticks (``sim.lease_record``): rows that start (t, true x, true y, est x, est y)
+        self._own_rows = self.plant.rows is not None
+        self._rows = self.plant.rows if self._own_rows else self.trace.rows
+        # the vehicle's estimate is in its own frame: moved into the true one unless the two are the same
+        self._shift = None if self.frame_offset == (0.0, 0.0) else self.frame_offset
         self._start_record()
+
+    @property
+    def vehicle(self):
+        """returnlink's vehicle aboard the plant (None: the firmware alone, or a companion not booted yet)."""
+        return self.plant.vehicle
+
+    @property
+    def audit_stale(self) -> int:
+        """Actuations the run's own audits found outside the lease last announced: a returnlink vehicle's teleop
+        setpoints (``_audit``), and whatever the plant audits of its own (the companion's router)."""
+        return self.stale_setpoints + self.plant.stale
 
     # ----- the loop ------------------------------------------------------------------------------------------
     def run(self) -> Run:
-        """Every tick to the end (or a ``stop`` event).
-
-        The objects alive before the loop (the libraries, the dialect, the scenario: some 80,000) are frozen out
-        of garbage collection while it runs, as none of them becomes garbage there: a full collection during the
-        run then scans only what the run made, instead of spending tens of milliseconds on them each time. They
-        are handed back to the collector afterwards, unless the caller had frozen objects of its own."""
+        """Every tick to the end (or a ``stop`` event), with the run's objects frozen out of garbage collection
+        (``frozen``); whatever the plant runs outside this process is stopped when the run ends, raises, or is
+        interrupted."""
         w0 = time.perf_counter()
-        n = int(round(self.duration / DT))
-        shown = -1
-        tty = sys.stderr.isatty()
-        step = 2 if tty else 25  # a redrawn bar on a terminal, a few lines in a log
-        freeze = gc.get_freeze_count() == 0
-        if freeze:
-            gc.freeze()
-        try:
-            for k in range(n):
-                self.step()
-                if self.stopped:
-                    break
-                if self.progress and (pct := 100 * (k + 1) // n) != shown and pct % step == 0:
-                    shown = pct
-                    bar = "#" * (pct // 4) + "." * (25 - pct // 4)
-                    print(f"\r  [{bar}] {pct:3d}%  t={self.t:6.1f} s", end="" if tty else "\n", file=sys.stderr,
-                          flush=True)
-        finally:
-            if freeze:
-                gc.unfreeze()
-        if self.progress and tty:
-            print(file=sys.stderr)
+        with frozen():
+            try:
+                self._boot()
+                self._loop()
+            finally:
+                self.plant.close()
         self.wall = time.perf_counter() - w0
         self._close_block()
         return self
 
+    def _boot(self) -> None:
+        """The plant to scenario time 0."""
+        self.plant.start()
+
+    def _loop(self) -> None:
+        """The ticks, paced by the plant, with a progress bar when asked (redrawn on a terminal, a few lines in a
+        log)."""
+        if self.progress:
+            self._shown, self._tty = -1, sys.stderr.isatty()
+            self._ticks_due = max(1, int(round(self.duration / DT)))
+        self.plant.pace(self._paced, self.duration)
+        if self.progress and self._tty:
+            print(file=sys.stderr)
+
+    def _paced(self, t: float) -> bool:
+        """The tick at ``t``; False once the run stops."""
+        self._tick(t)
+        if self.stopped:
+            return False
+        if self.progress and (pct := 100 * self.ticks // self._ticks_due) != self._shown \
+                and pct % (2 if self._tty else 25) == 0:
+            self._shown = pct
+            bar = "#" * (pct // 4) + "." * (25 - pct // 4)
+            print(f"\r  [{bar}] {pct:3d}%  t={t:6.1f} s{self.plant.status()}", end="" if self._tty else "\n",
+                  file=sys.stderr, flush=True)
+        return True
+
     def step(self) -> None:
+        """The next tick of a plant without a clock of its own."""
+        self._tick((self.ticks + 1) / TICK_RATE)
+
+    def _tick(self, t: float) -> None:
         """One tick, in the order of the module's docstring. Work nothing waits for is skipped (an empty queue, a
         dead station, a timed event not due yet), never reordered: the radio draws each packet's fate in the same
         order as ever."""
         self.ticks += 1
-        self.t = t = self.ticks / TICK_RATE
+        self.t = t
         self._deliver(t)
         if self.events and self.events[0].t <= t + 1e-9:
             self._events(t)
         for st in self._station_list:
             if st.alive and st.operator is not None:
                 st.operator.step(t)
-        self._tick_vehicle(t)
-        self.driver.advance(DT)
+        plant = self.plant
+        hears_last = plant.hears_last
+        if not hears_last:
+            self._tick_vehicle(t)
         pos = self.robot.pose[:2]
         radio = self.radio
         for st in self._station_list:
             st.state = radio.link(st.antenna, st.power_dbm, pos) if st.alive else None
-        self._downlink(self.endpoint.tick(t), t)
+        self._downlink(plant.frames(t), t)
         self._uplink(t)
+        if hears_last:
+            self._tick_vehicle(t)
         if t >= self.next_radio_status:
             self.next_radio_status = t + 1.0
             self._radio_status(t)
         self._record(t, pos)
 
     def _deliver(self, t: float) -> None:
-        """What the radio delivers by ``t``: to the vehicle's endpoint, and to every station (a dead one drops it).
-        A queue is received from only when its head is due (most ticks nothing is: a call saved)."""
-        inbox = self._inbox
-        if inbox and inbox[0][0] <= t:
-            for data, _src in self.bus.receive("vehicle", t):
-                self.endpoint.receive(data, t)
+        """What the radio delivers by ``t`` to every station (a dead one, or one nobody runs, drops it). A queue is
+        received from only when its head is due (most ticks nothing is: a call saved)."""
         for st in self._station_list:
             inbox = st.inbox
             if not inbox or inbox[0][0] > t:
                 continue
             for data, _src in self.bus.receive(st.name, t):
-                if st.alive:
+                if st.alive and st.gs is not None:
                     st.gs.feed(data, t)
-                    if st.operator is not None:
+                    if st.logged:
                         self._log_frame(data, t)
 
     def _tick_vehicle(self, t: float) -> None:
-        """The vehicle loop's tick, and what the metrics need of it: when the owner's link came back, and each
-        new lease event (the lease the runner's own audit expects, the losses and the regains)."""
-        v = self.vehicle
+        """What the radio delivered to the vehicle, then its tick, and what the record needs of that tick: when the
+        owner's link came back, and each new lease event (the lease the audit expects, the losses and the
+        regains)."""
+        plant = self.plant
+        inbox = self._inbox
+        if inbox and inbox[0][0] <= t:
+            plant.receive(self.bus.receive("vehicle", t), t)
+        v = plant.vehicle
+        if v is None:
+            plant.tick(t)
+            return
         before = self._vehicle_state(v)
-        v.tick(t)
+        plant.tick(t)
         self._vehicle_ticked(v, t, before)
 
     def _downlink(self, frames: list[bytes], t: float) -> None:
@@ -259,12 +335,12 @@ class Run(LeaseRecord):
         vehicle, unless out of range or jammed."""
         radio, bus = self.radio, self.bus
         for st in self._station_list:
-            if not st.alive:
+            if not st.alive or st.gs is None:
                 continue
             sent = st.gs.tick(t)
             if not sent:
                 continue
-            if st.operator is not None:
+            if st.logged:
                 for data in sent:
                     self._log_frame(data, t)
             if st.state is None or (self.jams and self._jammed(st.name, t)):
@@ -279,14 +355,14 @@ class Run(LeaseRecord):
         return self.jams.jammed(station, t)
 
     def _radio_status(self, t: float) -> None:
-        """The operator's telemetry radio reports both ends' RSSI, as a SiK radio would."""
+        """The operator's telemetry radio reports both ends' RSSI, as a SiK radio would: the ground end to its
+        station, the vehicle end to the plant (nothing while jammed: the radio hears nothing then)."""
         op = self._operator
         if not op.alive or op.state is None:
             return
         jammed = self._jammed(op.name, t)
         if not jammed:
-            # the vehicle's radio measures the same channel: its RSSI goes on the vehicle's link map
-            self.vehicle.radio_rssi(op.state.rssi_dbm)
+            self.plant.radio_status(op.state, t)
         data = self.radio_report.frame(op.state, jammed=jammed)
         op.gs.feed(data, t)
         self._log_frame(data, t)
@@ -296,38 +372,22 @@ class Run(LeaseRecord):
 
     # ----- timed events --------------------------------------------------------------------------------------
     def _events(self, t: float) -> None:
+        """The events due: ``stop`` and the radio's own (``sim.jams``) here; what one does to a station's software
+        is the plant's (``Plant.event``), and one that does not apply to it is noted for the summary."""
         while self.events and self.events[0].t <= t + 1e-9:
             ev = self.events.pop(0)
-            name = ev.station or self.scenario.operator_station
-            st = self.stations.get(name)
-            if radio_event(ev, st, self.jams, t):
-                if ev.action == "revive_gcs" and st is not None:
-                    # a station coming back resumes what it was doing: its stale lease and its old stream
-                    st.gs.t = t
-                    if st.gs.teleop is None:
-                        st.gs.drive_velocity(0.5, 0.0)
-            elif ev.action == "takeover" and st is not None:
-                st.alive = True
-                st.gs.acquire(allow_takeover=False)
-            elif ev.action == "rtl" and st is not None:
-                st.gs.rtl()
-            elif ev.action == "claim" and st is not None:
-                st.gs.claim(-1)
-            elif ev.action == "param" and st is not None:
-                st.gs.param_set(ev.name, ev.value)
-            elif ev.action == "stop":
+            st = self.stations.get(ev.station or self.scenario.operator_station)
+            if ev.action == "stop":
                 self.stopped = True
+            elif not radio_event(ev, st, self.jams, t) or ev.action == "revive_gcs":
+                note = self.plant.event(ev, st, t)
+                if note:
+                    self.notes.append(note)
 
     # ----- recording -----------------------------------------------------------------------------------------
     def _record(self, t: float, pos: tuple[float, float]) -> None:
-        v, tr = self.vehicle, self.trace
-        p = v.estimator.pose
-        cur = v.book.current
-        if cur is None:
-            holder, index, returning = 0, -1, False
-        else:
-            h = cur.holder
-            holder, index, returning = int(h), cur.index, h is Holder.RETURN_SERVICE
+        """The tick's rows: the plant's own, and for a plant that flies returnlink's leases the trace row and the
+        lease record (the block under way, the audit)."""
         op = self._operator
         state = op.state
         if state is None:
@@ -335,21 +395,44 @@ class Run(LeaseRecord):
         else:
             link = 0.0 if self.jams and self._jammed(op.name, t) else state.delivery
             rssi = state.rssi_dbm
+        plant = self.plant
+        if self._own_rows:
+            plant.record(t, pos, link, rssi)
+        if not plant.leases:
+            return
+        v = plant.vehicle
+        if v is None:  # not booted yet (the companion waits for the autopilot's first estimate)
+            ex, ey = plant.estimate()
+            self.trace.rows.append((t, pos[0], pos[1], ex, ey, 0, -1, State.NO_OWNER, link, rssi, False, 0.0, 0.0))
+            return
+        p = v.estimator.pose
+        shift = self._shift
+        if shift is None:
+            ex, ey = p.x, p.y
+        else:
+            ex, ey = shift[0] + p.x, shift[1] + p.y
+        cur = v.book.current
+        if cur is None:
+            holder, index, returning = 0, -1, False
+        else:
+            h = cur.holder
+            holder, index, returning = int(h), cur.index, h is Holder.RETURN_SERVICE
         speed, yaw_rate = v.command_out
-        tr.rows.append((t, pos[0], pos[1], p.x, p.y, holder, index, v.state(), link, rssi, v.link_is_good, speed,
-                        yaw_rate))
+        self.trace.rows.append((t, pos[0], pos[1], ex, ey, holder, index, v.state(), link, rssi, v.link_is_good,
+                                speed, yaw_rate))
         if v.setpoint is not None:
             self._audit(v)
         self._track_block(v, t, pos, cur, returning)
 
     def _audit(self, v) -> None:
-        """An independent check of the stale-command guard: a teleop setpoint that moved the robot this tick must
-        carry the lease the vehicle last announced as current (LEASE_EVENT) and come from the owner."""
+        """An independent check of a returnlink vehicle's stale-command guard: a teleop setpoint that moved the
+        robot this tick must carry the lease the vehicle last announced as current (LEASE_EVENT) and come from the
+        owner. (The companion runs without teleop: its guard is its router, which its plant audits.)"""
         sp = v.setpoint
         if sp is None or v.command_out == (0.0, 0.0) or self.announced is None:
             return
         if (sp.lease.epoch, sp.lease.path[0]) != self.announced or sp.sender != v.book.owner:
-            self.audit_stale += 1
+            self.stale_setpoints += 1
 
 
 def write_tlog(run: Run, path: Path) -> Path:

@@ -15,15 +15,17 @@ import pytest
 
 from gcs.station import mav
 from link.linkmap_format import decode
+from sim import metrics
 from sim.campaign.spec import SpecError, load_spec, parse_spec
 from sim.cli import main
-from sim.firmware import companion_metrics
-from sim.firmware.companion import CompanionRun, firmware_run
 from sim.firmware.companion_operator import CompanionOperator
 from sim.firmware.metrics import differing
 from sim.firmware.process import INSTANCE_ENV, MAX_INSTANCE, FirmwareError, claim_instance
-from sim.firmware.run import FirmwareRun, firmware_params
+from sim.firmware.run import CompanionRun, FirmwareRun
+from sim.plants.companion import CompanionPlant
+from sim.plants.firmware import FirmwarePlant, firmware_params
 from sim.policies import flies
+from sim.runner import Run
 from sim.scenario import load
 from tests.firmware_helpers import firmware_or_skip, short_scenario
 from vehicle.companion.setup import check
@@ -119,7 +121,7 @@ def twice(firmware, instance_range):
     runs = []
     for _ in range(2):
         run = CompanionRun(sc, 1, firmware=firmware, duration=DURATION).run()
-        run.metrics = companion_metrics.compute(run)
+        run.metrics = metrics.compute(run)
         runs.append(run)
     return runs
 
@@ -175,9 +177,13 @@ class StubbornOperator(CompanionOperator):
             self._step(t)
 
 
-class StubbornRun(CompanionRun):
+class StubbornPlant(CompanionPlant):
     def _make_operator(self, sc):
         return StubbornOperator(sc.route, sc.resume_route, self.origin, [], sc.attempts)
+
+
+class StubbornRun(CompanionRun):
+    plant_type = StubbornPlant
 
 
 def test_commands_sent_during_the_return_are_refused_never_forwarded(firmware, instance_range):
@@ -185,20 +191,21 @@ def test_commands_sent_during_the_return_are_refused_never_forwarded(firmware, i
     the firmware (the run's own audit of every forwarded frame finds none), and the return still brings the link
     back."""
     run = StubbornRun(load("tunnel"), 1, firmware=firmware, duration=DURATION).run()
-    m = companion_metrics.compute(run)
+    m = metrics.compute(run)
     assert run.audit_stale == 0 and m["stale_commands_executed"] == 0
     assert m["commands_rejected"] > 20 and run.companion.counters["refused"] > 20
     assert m["regained_by"] == "return" and m["blocks"][0]["reason"] == "LINK_REGAINED"
 
 
-def test_each_run_class_flies_only_its_own_policies(firmware):
+def test_each_plant_flies_only_its_own_policies(firmware):
     sc = load("tunnel")
     with pytest.raises(ValueError, match="companion"):
         FirmwareRun(sc, 1, "companion", firmware)  # the firmware alone has no companion to fly it with
     with pytest.raises(ValueError, match="ardupilot-hold"):
         CompanionRun(sc, 1, "ardupilot-hold", firmware)
-    assert isinstance(firmware_run(sc, 1, "companion", firmware), CompanionRun)
-    assert type(firmware_run(sc, 1, "ardupilot-hold", firmware)) is FirmwareRun
+    # the one loop picks the plant from the vehicle and the policy
+    assert type(Run(sc, "ardurover", 1, policy="companion", firmware=firmware).plant) is CompanionPlant
+    assert type(Run(sc, "ardurover", 1, policy="ardupilot-hold", firmware=firmware).plant) is FirmwarePlant
 
 
 def test_the_instance_variable_says_where_the_search_starts(monkeypatch):

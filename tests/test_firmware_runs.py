@@ -17,13 +17,13 @@ from pathlib import Path
 
 import pytest
 
+from sim import metrics
 from sim.campaign import sweep
 from sim.campaign.executors import SerialExecutor
 from sim.campaign.spec import parse_spec
 from sim.cli import main
-from sim.firmware import metrics
 from sim.firmware.bridge import MAGIC, SERVO_PACKET, FrameVerdict
-from sim.firmware.metrics import TOLERANCE
+from sim.firmware.metrics import TOLERANCE, differing
 from sim.firmware.process import FirmwareError, wait_for
 from sim.firmware.run import FirmwareRun
 from sim.scenario import load
@@ -104,17 +104,17 @@ def test_same_seed_flies_the_same_drive_until_the_loss(runs, firmware):
     again = metrics.compute(FirmwareRun(load("tunnel"), 1, "ardupilot-smartrtl", firmware, duration=100.0).run())
     first = runs["ardupilot-smartrtl"].metrics
     for key in ("link_lost_s", "return_started_s", "loss_position"):
-        assert key not in metrics.differing({key: first[key]}, {key: again[key]}), key
+        assert key not in differing({key: first[key]}, {key: again[key]}), key
     assert [e["mode"] for e in again["firmware_modes"]][:3] == ["MANUAL", "GUIDED", "SMART_RTL"]
 
 
 def test_differing_sees_a_real_difference_and_forgives_jitter(runs):
     m = runs["ardupilot-smartrtl"].metrics
     jitter = {**m, "return_started_s": m["return_started_s"] + 0.06, "collisions": m["collisions"] + 1}
-    assert metrics.differing(m, jitter) == []
+    assert differing(m, jitter) == []
     moved = {**m, "rest_position": [m["rest_position"][0] + 5, m["rest_position"][1]],
              "firmware_modes": m["firmware_modes"][:-1]}
-    assert metrics.differing(m, moved) == ["firmware_modes", "rest_position"]
+    assert differing(m, moved) == ["firmware_modes", "rest_position"]
 
 
 def test_two_runs_side_by_side_claim_different_instances(firmware):

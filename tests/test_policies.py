@@ -332,7 +332,7 @@ def test_a_baseline_changing_state_is_announced_in_that_tick():
     FS_TIMEOUT wait (HOLDING) to the retrace (RETURNING) changes no lease, so the telemetry must still see it, or
     CURRENT_MODE would show the old mode until the link came back."""
     r = Run(load("tunnel"), "rover", duration=TUNNEL_S, policy="smartrtl")
-    tel = r.endpoint.telemetry
+    tel = r.plant.endpoint.telemetry
     seen = set()
     for _ in range(int(round(TUNNEL_S / DT))):
         r.step()

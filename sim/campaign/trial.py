@@ -89,17 +89,15 @@ def scenario_of(trial: Trial):
 def simulate(trial: Trial, progress: bool = False):
     """Run the trial's simulation and compute its metrics: the ``Run`` (for plots) with ``run.metrics`` set."""
     from sim import outputs
+    from sim.runner import Run
 
+    options = {}
     if trial.vehicle == FIRMWARE_VEHICLE:
-        from sim.firmware.companion import firmware_run
         from sim.firmware.locate import find_firmware
 
-        run = firmware_run(scenario_of(trial), trial.seed, trial.policy, find_firmware(trial.firmware or None),
-                           progress=progress).run()
-    else:
-        from sim.runner import Run
-
-        run = Run(scenario_of(trial), trial.vehicle, trial.seed, progress=progress, policy=trial.policy).run()
+        options["firmware"] = find_firmware(trial.firmware or None)
+    run = Run(scenario_of(trial), trial.vehicle, trial.seed, progress=progress, policy=trial.policy,
+              **options).run()
     run.metrics = outputs.compute(run)
     return run
 

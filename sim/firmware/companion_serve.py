@@ -26,9 +26,9 @@ from pathlib import Path
 from link.signing import stamp_from_unix
 from link.storage import remove_leftovers
 from sim.firmware.serve import FirmwareServer
+from sim.plants.companion import CompanionPlant
 from sim.policies import COMPANION_POLICY
 from sim.scenario import Scenario
-from vehicle.companion.app import Companion
 from vehicle.epochs import EpochLog
 from vehicle.keystore import KeyStore
 from vehicle.lease_terms import State
@@ -38,17 +38,16 @@ _STATE_NAMES = {v: k.lower().replace("_", " ") for k, v in vars(State).items() i
 
 
 class CompanionServer(FirmwareServer):
-    """The firmware served with returnlink companion on its telemetry port (see the module docstring)."""
+    """The firmware served with returnlink companion on its telemetry port (see the module docstring): the companion
+    plant (``sim.plants.companion``), its companion booted as ``sim serve`` boots the native vehicle."""
 
-    policies = (COMPANION_POLICY,)
+    plant_type = CompanionPlant
 
     def __init__(self, scenario: Scenario, seed: int | None, firmware: Path, port: int = 14580,
                  peers: tuple[tuple[str, int], ...] = (("127.0.0.1", 14550), ("127.0.0.1", 14540)),
                  perfect_link: bool = False, speedup: float = 1.0, duration: float = math.inf,
                  log_path: Path | None = None, out=sys.stderr, param_file: Path | None = None,
                  keystore: KeyStore | None = None, epochs_file: Path | None = None) -> None:
-        super().__init__(scenario, seed, COMPANION_POLICY, firmware, port, peers, perfect_link, speedup, duration,
-                         log_path, out)
         # as the native vehicle boots (``sim.driver.simulated_vehicle``): the file (a torn write's leftovers
         # cleared first), else the defaults, and the scenario's own on top
         if param_file is not None:
@@ -57,15 +56,13 @@ class CompanionServer(FirmwareServer):
         for k, v in scenario.params.items():
             params.set(k, v)
         self.epochs = EpochLog(epochs_file)
-        self.to_ground: list[bytes] = []
-        self.companion = Companion(params, self._to_autopilot, self.to_ground.append, keystore=keystore,
-                                   stamp=lambda t: stamp_from_unix(time.time()), boot_epoch=self.epochs.boot,
-                                   seed=self.seed, param_file=param_file, on_epoch=self.epochs.issued,
-                                   autopilot_name="the ArduPilot firmware", pivots=True)
+        super().__init__(scenario, seed, COMPANION_POLICY, firmware, port, peers, perfect_link, speedup, duration,
+                         log_path, out, params=params, keystore=keystore,
+                         stamp=lambda t: stamp_from_unix(time.time()), boot_epoch=self.epochs.boot,
+                         param_file=param_file, on_epoch=self.epochs.issued)
+        self.companion = self.plant.companion
+        self.to_ground = self.plant.to_ground
         self.transport.pinned = self.companion.pinned  # the owner's address is never crowded out
-
-    def _to_autopilot(self, data: bytes) -> None:
-        self.link.send(data)
 
     def _tick(self, t: float) -> None:
         proxy = self.proxy

@@ -1,5 +1,6 @@
-"""The §7 figures of a firmware run, in the same true frame as the native runs, plus ``firmware`` (its version)
-and ``firmware_modes`` (its mode timeline as ArduPilot names the modes).
+"""The §7 figures of a run of the firmware alone (``sim.plants.firmware.FirmwarePlant.figures``), in the same true
+frame as the native runs, plus ``firmware`` (its version) and ``firmware_modes`` (its mode timeline as ArduPilot
+names the modes); ``sim.metrics.compute`` adds the run's own keys and the one verdict, as for every plant.
 
 The firmware has no leases, so its link-loss story is read from its modes: a *return episode* begins when it
 switches itself into HOLD, RTL or SMART_RTL (its GCS failsafe; a mode the scripted operator asked for is an
@@ -25,20 +26,19 @@ import math
 
 from sim.firmware.lockstep import MODE_NAMES
 from sim.firmware.operator import GUIDED, RETURN_MODES, RTL, SMART_RTL
-from sim.firmware.run import FirmwareRun
-from sim.metrics import FRAMES, KEYS, REGAIN_MOVED_M, _point, _r
+from sim.metrics import FRAMES, KEYS, REGAIN_MOVED_M, point, rounded
 from vehicle.link_watch import GOOD_QUALITY as GOOD_LINK_QUALITY
 
 FIRMWARE_KEYS = (*KEYS, "firmware", "firmware_modes")
 
 
-def episodes(run: FirmwareRun) -> list[tuple[float, float | None, int]]:
-    """(start, end or None, mode) of each return the firmware made on its own: a switch into a return mode from a
-    driving mode that the operator did not ask for; it ends when the mode is GUIDED again."""
+def episodes(plant) -> list[tuple[float, float | None, int]]:
+    """(start, end or None, mode) of each return the firmware (``plant``) made on its own: a switch into a return
+    mode from a driving mode that the operator did not ask for; it ends when the mode is GUIDED again."""
     out: list[tuple[float, float | None, int]] = []
-    asked = [t for t, text in run.operator.log if text == "rtl requested"]
+    asked = [t for t, text in plant.operator.log if text == "rtl requested"]
     current: list | None = None
-    for t, mode in run.link.tap.modes:
+    for t, mode in plant.link.tap.modes:
         if current is None and mode in RETURN_MODES and t > 0:
             if any(abs(t - a) < 2.0 for a in asked):
                 continue
@@ -63,20 +63,23 @@ def contact_runs(heard: list[float], good_s: float) -> list[tuple[float, float]]
     return runs
 
 
-def compute(run: FirmwareRun) -> dict:
-    sc, rows = run.scenario, run.rows
-    timeout = run.lnk_timeout
+def figures(run) -> dict:
+    """The figures of ``run`` (a ``sim.runner.Run`` of the firmware plant) read from the firmware's own record: its
+    rows, the times it heard its station, its modes (see the module docstring)."""
+    plant = run.plant
+    sc, rows, heard = run.scenario, plant.rows, plant.heard
+    timeout = plant.lnk_timeout
     good_s = float(sc.params.get("LNK_GOOD_S", 1.5))
     regain_s = float(sc.params.get("LNK_REGAIN_S", 1.0))
-    eps = episodes(run)
+    eps = episodes(plant)
     first = eps[0] if eps else None
     lost = None
     if first is not None:
-        k = bisect.bisect_right(run.heard, first[0]) - 1
-        lost = run.heard[k] if k >= 0 else None
+        k = bisect.bisect_right(heard, first[0]) - 1
+        lost = heard[k] if k >= 0 else None
     regained = since = None
     if first is not None:
-        for a, b in contact_runs(run.heard, good_s):
+        for a, b in contact_runs(heard, good_s):
             if b >= first[0] and b - max(a, first[0]) >= regain_s - 1e-9:
                 since = max(a, first[0])
                 regained = since + regain_s
@@ -98,9 +101,9 @@ def compute(run: FirmwareRun) -> dict:
             disp = max(disp, math.dist(rows[k][1:3], start))
         hits = rows[kb][11] - rows[ka][11]
         distance, max_disp, driving, collided = distance + d, max(max_disp, disp), driving + moving, collided + hits
-        blocks.append({"index": i, "command": MODE_NAMES.get(mode, str(mode)), "start_s": _r(a), "end_s": _r(b),
-                       "reason": "OPERATOR" if b is not None else None, "distance_m": _r(d, 2),
-                       "displacement_m": _r(disp, 2), "limit_m": None})
+        blocks.append({"index": i, "command": MODE_NAMES.get(mode, str(mode)), "start_s": rounded(a),
+                       "end_s": rounded(b), "reason": "OPERATOR" if b is not None else None,
+                       "distance_m": rounded(d, 2), "displacement_m": rounded(disp, 2), "limit_m": None})
     rest = quality = regained_by = final_err = None
     if first is not None:
         k_rest = k_of(first[1]) - 1 if first[1] is not None else len(rows) - 1
@@ -116,57 +119,31 @@ def compute(run: FirmwareRun) -> dict:
             final_err = math.dist(rest, armed[1:3])
     est = [(r[1], r[2], r[3], r[4]) for r in rows if not math.isnan(r[3])]
     rmse = math.sqrt(sum((a - c) ** 2 + (b - d) ** 2 for a, b, c, d in est) / len(est)) if est else None
-    m = {
-        "scenario": sc.name, "vehicle": run.kind, "seed": run.seed, "sim_duration_s": _r(run.t, 2),
-        "link_lost_s": _r(lost), "return_started_s": _r(first[0] if first else None),
-        "reaction_latency_s": _r(first[0] - lost - timeout if first and lost is not None else None, 4),
-        "link_regained_s": _r(regained), "distance_back_m": _r(distance, 2), "max_displacement_m": _r(max_disp, 2),
-        "final_target_error_m": _r(final_err, 2), "collisions": run.world.collisions,
-        "stale_commands_executed": None, "commands_rejected": run.link.tap.rejected, "estimator_rmse_m": _r(rmse),
-        "trail_points": None, "trail_max_deviation_m": None,
-        "real_time_factor": _r(run.t / run.wall if run.wall > 0 else None, 1), "lease_events": [],
-        "passed": True, "failures": [],
-        "policy": run.policy, "loss_position": _point(run.true_at(lost) if lost is not None else None),
-        "rest_position": _point(rest), "rest_link_quality": _r(quality), "link_cycles": len(eps),
+    return {
+        "link_lost_s": rounded(lost), "return_started_s": rounded(first[0] if first else None),
+        "reaction_latency_s": rounded(first[0] - lost - timeout if first and lost is not None else None, 4),
+        "link_regained_s": rounded(regained), "distance_back_m": rounded(distance, 2),
+        "max_displacement_m": rounded(max_disp, 2),
+        "final_target_error_m": rounded(final_err, 2), "collisions": run.world.collisions,
+        "stale_commands_executed": None, "commands_rejected": plant.link.tap.rejected,
+        "estimator_rmse_m": rounded(rmse), "trail_points": None, "trail_max_deviation_m": None, "lease_events": [],
+        "loss_position": point(run.true_at(lost) if lost is not None else None),
+        "rest_position": point(rest), "rest_link_quality": rounded(quality), "link_cycles": len(eps),
         "regained_by": regained_by, "collisions_during_return": collided,
-        "return_speed_mps": _r(distance / driving if driving > 0 else None), "blocks": blocks,
+        "return_speed_mps": rounded(distance / driving if driving > 0 else None), "blocks": blocks,
         "frames": {**FRAMES, "final_target_error_m": "true (the firmware's home: where the rover armed)"},
         "relapses": None,  # returnlink's own notion (a regain, then a loss with no operator driving): no leases here
-        "firmware": run.link.tap.version, "firmware_modes": run.firmware_modes,
+        "firmware": plant.link.tap.version, "firmware_modes": plant.firmware_modes,
     }
-    m["failures"] = verdict(run, m)
-    m["passed"] = not m["failures"]
-    assert tuple(m) == FIRMWARE_KEYS
-    return m
 
 
-def verdict(run: FirmwareRun, m: dict) -> list[str]:
-    """The scenario's own criteria, those that apply to a firmware (none about leases or trails)."""
-    c = run.scenario.criteria
-    out = []
-    if c.return_started is not None and (m["return_started_s"] is not None) != c.return_started:
-        out.append("no return started" if c.return_started else "a return started")
-    if c.link_regained is not None and (m["link_regained_s"] is not None) != c.link_regained:
-        out.append("link never regained after the loss" if c.link_regained else "link regained")
-    if c.max_final_target_error_m is not None and m["final_target_error_m"] is not None \
-            and m["final_target_error_m"] > c.max_final_target_error_m:
-        out.append(f"final target error {m['final_target_error_m']} m > {c.max_final_target_error_m} m")
-    if m["collisions"] > c.max_collisions:
-        out.append(f"{m['collisions']} collisions > {c.max_collisions}")
-    if c.min_distance_back_m is not None and m["distance_back_m"] < c.min_distance_back_m:
-        out.append(f"distance back {m['distance_back_m']} m < {c.min_distance_back_m} m")
-    if c.regained_by is not None and m["regained_by"] != c.regained_by:
-        out.append(f"link regained by {m['regained_by']}, expected by {c.regained_by}")
-    return out
-
-
-def summary(run: FirmwareRun, m: dict) -> str:
+def summary(run, m: dict) -> str:
     def f(x, unit="", nd=1):
         return "-" if x is None else f"{x:.{nd}f}{unit}"
 
     lines = [
         f"returnlink sim run {m['scenario']} --vehicle ardurover --seed {m['seed']} --policy {m['policy']}",
-        f"  firmware {m['firmware']} (booted in {run.link.boot_s:.1f} simulated s before scenario time 0)",
+        f"  firmware {m['firmware']} (booted in {run.plant.link.boot_s:.1f} simulated s before scenario time 0)",
         f"  simulated {f(m['sim_duration_s'], ' s')} at {f(m['real_time_factor'], 'x real time')}",
         f"  link lost at {f(m['link_lost_s'], ' s')}, firmware return began {f(m['return_started_s'], ' s')}"
         f" (reaction {f(m['reaction_latency_s'], ' s', 3)} after LNK_TIMEOUT)",

@@ -1,7 +1,10 @@
 """The two pictures of a firmware run, like a native run's: where the rover went (true frame, coloured by the
 firmware's mode, with the loss and rest points and the EKF's path) and what the firmware did over time (its mode
 timeline against the radio link and the distance driven back). A companion run's return is its return-service
-lease, which drives in GUIDED: that is what its pictures mark as the return."""
+lease, which drives in GUIDED: that is what its pictures mark as the return.
+
+``run`` is a ``sim.runner.Run`` of a firmware plant, or a ``sim serve`` server of one (``sim.firmware.serve``): both
+have the plant (``run.plant``: its rows, its link, the times it heard its station), the world and the scenario."""
 
 from __future__ import annotations
 
@@ -11,7 +14,6 @@ import numpy as np
 
 from sim.firmware.lockstep import MODE_NAMES
 from sim.firmware.operator import RETURN_MODES
-from sim.firmware.run import FirmwareRun
 from sim.plots import draw_world, plt, save
 from vehicle.lease import Holder
 
@@ -19,22 +21,23 @@ MODE_COLOURS = {"GUIDED": "tab:green", "HOLD": "tab:orange", "RTL": "tab:red", "
                 "MANUAL": "0.5"}
 
 
-def _columns(run: FirmwareRun) -> dict[str, np.ndarray]:
-    a = np.array([r[:10] for r in run.rows], dtype=float) if run.rows else np.zeros((0, 10))
+def _columns(run) -> dict[str, np.ndarray]:
+    rows = run.plant.rows
+    a = np.array([r[:10] for r in rows], dtype=float) if rows else np.zeros((0, 10))
     return {"t": a[:, 0], "x": a[:, 1], "y": a[:, 2], "ex": a[:, 3], "ey": a[:, 4], "mode": a[:, 5],
             "link": a[:, 6], "rssi": a[:, 7]}
 
 
-def _returning(run: FirmwareRun, modes: np.ndarray) -> np.ndarray:
-    """Per tick, whether a return was under way: the companion's return-service lease, else a firmware failsafe
-    mode (the companion drives its return in GUIDED, the mode the operator drives in)."""
+def _returning(run, modes: np.ndarray) -> np.ndarray:
+    """Per tick, whether a return was under way: the companion's return-service lease in a run's trace, else a
+    firmware failsafe mode (the companion drives its return in GUIDED, the mode the operator drives in)."""
     trace = getattr(run, "trace", None)
-    if trace is not None:
+    if run.plant.leases and trace is not None:
         return np.array(trace.holder, dtype=int) == int(Holder.RETURN_SERVICE)
     return np.isin(modes, tuple(RETURN_MODES))
 
 
-def trajectory(run: FirmwareRun, path: Path) -> Path:
+def trajectory(run, path: Path) -> Path:
     c = _columns(run)
     m = run.metrics or {}
     fig, ax = plt.subplots(figsize=(11, 8))
@@ -45,7 +48,7 @@ def trajectory(run: FirmwareRun, path: Path) -> Path:
         name = MODE_NAMES.get(int(k), str(k))
         sel = np.where(modes == k, 1.0, np.nan)
         ax.plot(c["y"] * sel, c["x"] * sel, color=MODE_COLOURS.get(name, "k"), lw=1.6, label=f"true path, {name}")
-    companion = getattr(run, "companion", None) is not None
+    companion = run.plant.leases  # returnlink companion beside the firmware
     if companion:
         sel = np.where(_returning(run, modes), 1.0, np.nan)
         ax.plot(c["y"] * sel, c["x"] * sel, color="tab:blue", lw=3.2, alpha=0.6,
@@ -65,12 +68,13 @@ def trajectory(run: FirmwareRun, path: Path) -> Path:
     return save(fig, path)
 
 
-def timeline(run: FirmwareRun, path: Path) -> Path:
+def timeline(run, path: Path) -> Path:
     c = _columns(run)
     t = c["t"]
     fig, axes = plt.subplots(3, 1, figsize=(11, 7), sharex=True, gridspec_kw={"height_ratios": [1.4, 1, 1]})
     ax = axes[0]
-    seen = sorted({int(k) for k in c["mode"]} | {int(k) for _t, k in run.link.tap.modes})
+    tap = run.plant.link.tap
+    seen = sorted({int(k) for k in c["mode"]} | {int(k) for _t, k in tap.modes})
     levels = {k: i for i, k in enumerate(seen)}
     ax.step(t, [levels[int(k)] for k in c["mode"]], where="post", color="tab:purple")
     ax.set_yticks(range(len(seen)), [MODE_NAMES.get(k, str(k)) for k in seen], fontsize=8)
@@ -82,10 +86,11 @@ def timeline(run: FirmwareRun, path: Path) -> Path:
     ax = axes[1]
     ax.plot(t, c["link"], color="tab:green", lw=0.8, label="packet delivery (radio)")
     heard = np.zeros_like(t)
-    if len(t) and run.heard:
-        k = np.clip(np.round(np.array(run.heard) / (t[1] - t[0] if len(t) > 1 else 1)).astype(int) - 1, 0, len(t) - 1)
+    if len(t) and run.plant.heard:
+        k = np.clip(np.round(np.array(run.plant.heard) / (t[1] - t[0] if len(t) > 1 else 1)).astype(int) - 1, 0,
+                    len(t) - 1)
         heard[k] = 1.0
-    hearer = "the companion" if getattr(run, "companion", None) is not None else "the firmware"
+    hearer = "the companion" if run.plant.leases else "the firmware"
     ax.vlines(t[heard > 0], 0, 0.15, color="tab:green", lw=0.5, alpha=0.6, label=f"station heard by {hearer}")
     ax.set_ylim(-0.05, 1.05)
     ax.set_ylabel("link")
@@ -99,6 +104,6 @@ def timeline(run: FirmwareRun, path: Path) -> Path:
     ax.plot(t, np.cumsum(step * returning), color="tab:blue")
     ax.set_ylabel("driven back (m)")
     ax.set_xlabel("simulated time since the firmware was ready (s)")
-    fig.suptitle(f"{run.scenario.name} (ArduPilot {run.link.tap.version}, seed {run.seed}, policy {run.policy})")
+    fig.suptitle(f"{run.scenario.name} (ArduPilot {tap.version}, seed {run.seed}, policy {run.policy})")
     return save(fig, path)
 

@@ -16,18 +16,33 @@ from pathlib import Path
 from link.proxy import RadioProxy
 from link.radio import Radio
 from link.transports import UdpTransport
-from sim.firmware.run import MODE_NAMES, FirmwareRun
+from sim.firmware.lockstep import MODE_NAMES
+from sim.plants.firmware import FirmwarePlant
+from sim.policies import FIRMWARE_VEHICLE
+from sim.runner import frozen
 from sim.scenario import Scenario
 
 
-class FirmwareServer(FirmwareRun):
+class FirmwareServer:
+    """The firmware plant (``sim.plants.firmware``) behind the radio proxy instead of the lockstep loop's scripted
+    stations: the plant's lockstep physics and pace, a loop of its own (no scenario clock, no operator)."""
+
+    plant_type: type = FirmwarePlant
+
     def __init__(self, scenario: Scenario, seed: int | None, policy: str, firmware: Path, port: int = 14580,
                  peers: tuple[tuple[str, int], ...] = (("127.0.0.1", 14550), ("127.0.0.1", 14540)),
                  perfect_link: bool = False, speedup: float = 1.0, duration: float = math.inf,
-                 log_path: Path | None = None, out=sys.stderr) -> None:
-        self.speedup = speedup  # before the firmware's link is made: it paces itself
-        super().__init__(scenario, seed, policy, firmware, duration=duration, log_path=log_path)
-        self.stations = {}  # nobody scripted: whoever connects is the ground station
+                 log_path: Path | None = None, out=sys.stderr, **plant_options) -> None:
+        self.scenario = scenario
+        self.seed = scenario.seed if seed is None else seed
+        self.policy = policy
+        self.duration = duration
+        # the firmware paces itself at ``speedup``
+        self.plant = self.plant_type(scenario, FIRMWARE_VEHICLE, self.seed, policy, firmware, log_path, speedup,
+                                     **plant_options)
+        self.world, self.robot, self.link, self.rows = self.plant.world, self.plant.robot, self.plant.link, \
+            self.plant.rows
+        self.metrics: dict | None = None  # nothing is judged: what the plot's title reads
         self.transport = UdpTransport(("127.0.0.1", port), peers)
         st = scenario.station(scenario.operator_station)
         radio = None if perfect_link else Radio(scenario.radio, self.world.attenuation_db, self.seed + 1)
@@ -41,9 +56,13 @@ class FirmwareServer(FirmwareRun):
 
     def _boot(self) -> None:
         print("returnlink: the firmware is booting (its EKF needs a GPS fix first)...", file=self.out, flush=True)
-        super()._boot()
+        self.plant.start()
         tap = self.link.tap
         print(f"returnlink: {tap.version} ready after {self.link.boot_s:.1f} simulated s", file=self.out, flush=True)
+
+    def _paced(self, t: float) -> bool:
+        self._tick(t)
+        return True
 
     def _tick(self, t: float) -> None:
         proxy = self.proxy
@@ -75,7 +94,15 @@ class FirmwareServer(FirmwareRun):
         return ""
 
     def run(self) -> FirmwareServer:
+        """Until ``duration`` or an interrupt; the firmware is stopped however it ends (the objects alive before
+        frozen out of garbage collection meanwhile, as in a lockstep run: ``sim.runner.frozen``)."""
         try:
-            return super().run()
+            with frozen():
+                try:
+                    self._boot()
+                    self.plant.pace(self._paced, self.duration)
+                finally:
+                    self.plant.close()
         finally:
             self.transport.sock.close()
+        return self

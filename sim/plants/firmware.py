@@ -1,0 +1,212 @@
+"""The firmware plant: the real ArduPilot Rover firmware in a scenario's world, flying its own failsafes, for
+``sim.runner.Run`` (``returnlink sim run SCENARIO --vehicle ardurover``).
+
+The scenario's pymunk rover (walls stay collisions) is driven by the firmware's servo outputs through the JSON
+bridge, lockstep (``sim.firmware.lockstep``): the firmware asks for a physics step per frame (200 Hz), the physics
+steps and answers, so simulated time is the physics' own and the run goes as fast as both processes allow. Every
+20 ms of it (the native tick) the loop's tick runs: the firmware's MAVLink traffic (its SERIAL0, sent to a UDP
+socket of ours) goes through ``link.radio`` to the ground stations, the scripted operator and the scenario's timed
+events act, and what the stations send goes through the radio to the firmware, before its next frame. Its GCS
+failsafe hears exactly what the radio delivers. The same seed gives the same radio fates, sensors-free physics and
+operator as the native rover flying the scenario, so the firmware's failsafes are compared in the same world.
+
+Scenario time 0 is the moment the firmware is ready (``Lockstep.boot``: home, EKF on GPS, pre-arm checks passed).
+
+The firmware's own simulated GPS stays on in the scenario's GPS-denied zones: ArduPilot's SITL rover gets no wheel
+odometry from this bridge, so without GPS its EKF would have no position source at all, while the native vehicle
+dead-reckons on odometry there. Switching it off would compare a blind firmware with a dead-reckoning vehicle,
+measuring the sensor suite rather than the link-loss behaviour this comparison is for.
+
+Only the operator's station runs software (``sim.firmware.operator.FirmwareOperator``, a person flying the firmware
+in GUIDED); the others are antennas the radio carries to and nobody listens at. The firmware has no leases: its
+record is its own rows (mode, arming, collisions) and the times it heard its station, and its figures are read
+from its mode timeline (``sim.firmware.metrics``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+from link.radio import LinkState, subsystem_rng
+from sim.firmware import metrics
+from sim.firmware.lockstep import DT, MODE_NAMES, SKID_PARAMS, SPEEDUP, Lockstep
+from sim.firmware.operator import FirmwareOperator
+from sim.jams import RADIO_EVENTS
+from sim.policies import COMPANION_POLICY, DEFAULT_FIRMWARE_POLICY, FAILSAFE_POLICIES, FIRMWARE_VEHICLE
+from sim.robots import make_robot
+from sim.scenario import Event, Scenario, Station
+from vehicle.companion.setup import NEEDS
+
+# per policy; the companion's is the backstop: Hold once a dead companion's keepalive stops (docs/architecture.md §11)
+FS_ACTION: dict[str, int] = {"ardupilot-hold": 2, "ardupilot-rtl": 1, "ardupilot-smartrtl": 4, COMPANION_POLICY: 2}
+
+
+def firmware_params(policy: str, lnk_timeout: float, max_speed: float) -> dict[str, float]:
+    """What a firmware run sets on top of ArduPilot's own SITL rover defaults, and why:
+    - the policy's failsafe: FS_GCS_ENABLE 1, FS_ACTION per policy, FS_GCS_TIMEOUT = the scenario's LNK_TIMEOUT
+      (at least 2 s, the firmware's range), so it reacts to the same silence the native vehicle does;
+    - FS_THR_ENABLE 0: nobody holds an RC transmitter here, and its radio failsafe would fire at once;
+    - CRUISE_SPEED/CRUISE_THROTTLE matching the bridge's throttle scale (full throttle = the rover's top speed), so
+      the speed controller's feed-forward is right from the start;
+    - WP_RADIUS 1 m: a GUIDED position target counts as reached where the scripted operator moves on;
+    - skid steering (SERVO1_FUNCTION 73, SERVO3_FUNCTION 74): the scenario's rover is a differential drive that
+      turns on the spot, as the native vehicle's is, so only the autopilot differs between the two (as a car, the
+      firmware had to drive forward to turn round and wedged itself in the 3.6 m culvert).
+    For the companion the GCS failsafe is its backstop, not the link-loss policy: its keepalive is what the firmware
+    hears, so FS_GCS_TIMEOUT is what ``returnlink companion --check`` asks for (2..5 s), and every other parameter
+    on that list is set to the value ``--configure`` would set (``vehicle.companion.setup.NEEDS``), so the run
+    starts from a firmware the companion's own check passes."""
+    params = {"FS_GCS_ENABLE": 1, "FS_ACTION": FS_ACTION[policy], "FS_GCS_TIMEOUT": max(2.0, lnk_timeout),
+              "FS_THR_ENABLE": 0, "CRUISE_SPEED": round(max_speed / 2, 3), "CRUISE_THROTTLE": 50, "WP_RADIUS": 1.0,
+              **SKID_PARAMS}
+    if policy == COMPANION_POLICY:
+        for need in NEEDS:
+            value = params.get(need.name, 0.0)  # ArduPilot's default of the others is 0
+            params[need.name] = value if need.ok(value) else need.fix(value)
+    return params
+
+
+class FirmwarePlant:
+    """The firmware flying the scenario with its own failsafes (see the module docstring). ``link`` is the
+    firmware in lockstep with ``robot`` (``Lockstep``: its process, its bridge, its ``tap``); ``rows`` its record
+    per tick: (t, true x, true y, est x, est y, mode, link delivery, rssi, speed cmd, yaw rate cmd, armed,
+    collisions so far); ``heard`` the scenario times at which it received a frame from the operator's station."""
+
+    kind = FIRMWARE_VEHICLE
+    policies: tuple[str, ...] = FAILSAFE_POLICIES  # what this plant flies
+    leases = False
+    hears_last = True
+    report = "sim.firmware.report"
+    vehicle = None  # no returnlink aboard
+    stale = 0  # no lease to audit against
+
+    def __init__(self, scenario: Scenario, kind: str = FIRMWARE_VEHICLE, seed: int | None = None,
+                 policy: str = DEFAULT_FIRMWARE_POLICY, firmware: Path | None = None, log_path: Path | None = None,
+                 speedup: float = SPEEDUP) -> None:
+        """``speedup``: the firmware's own pace; lockstep runs leave the pace to the bridge (``SPEEDUP``), a
+        server in real time asks for 1."""
+        if kind != FIRMWARE_VEHICLE:
+            raise ValueError(f"vehicle {kind!r} is not the firmware ({FIRMWARE_VEHICLE!r})")
+        if policy not in self.policies:
+            raise ValueError(f"policy {policy!r} is not one of {', '.join(self.policies)}")
+        if firmware is None:
+            raise ValueError("no firmware binary given")
+        self.scenario = sc = scenario
+        self.policy = policy
+        self.seed = sc.seed if seed is None else seed
+        self.world = sc.world()
+        x, y, yaw = sc.start
+        self.robot = make_robot("rover", self.world, x, y, yaw, subsystem_rng(self.seed, "robot"))
+        self.origin = (x, y)
+        self.frame_offset = self.origin  # the autopilot's local frame (its EKF origin) in the true frame
+        self.lnk_timeout = float(sc.params.get("LNK_TIMEOUT", 3.0))
+        self.link = Lockstep(self.world, self.robot, firmware,
+                             firmware_params(policy, self.lnk_timeout, self.robot.max_speed), speedup, log_path)
+        self.rows: list[tuple] = []
+        self.heard: list[float] = []
+        self.operator: FirmwareOperator | None = None  # made with the operator's station
+        self._op_name = sc.operator_station
+
+    def _make_operator(self, sc: Scenario) -> FirmwareOperator:
+        """The scripted operator: a person flying the firmware in GUIDED from the scenario's station."""
+        return FirmwareOperator(sc.route, sc.resume_route, self.origin, sc.attempts,
+                                sysid=sc.station(sc.operator_station).sysid)
+
+    # ----- the scenario around it ----------------------------------------------------------------------------
+    def station(self, spec: Station, operator: bool) -> tuple[FirmwareOperator | None, None]:
+        """The operator's station is the scripted operator itself (its own MAVLink, deciding as it sends); nobody
+        runs the others."""
+        if not operator:
+            return None, None
+        self.operator = self._make_operator(self.scenario)
+        return self.operator, None
+
+    def event(self, ev: Event, st, t: float) -> str | None:
+        """The operator switches to RTL when the scenario says so; leases, claims and returnlink parameters mean
+        nothing to the firmware: said, not faked."""
+        if ev.action in RADIO_EVENTS:
+            return None
+        if ev.action == "rtl" and st is not None and st.gs is not None:
+            st.gs.request_rtl(t)
+            return None
+        return f"t={ev.t:g} s: event {ev.action!r} does not apply to the ArduPilot firmware"
+
+    # ----- time ----------------------------------------------------------------------------------------------
+    def start(self) -> None:
+        self.link.start()
+        self.link.boot()
+
+    def pace(self, tick: Callable[[float], bool], duration: float) -> None:
+        """The firmware's physics time, frame by frame, with a tick each time it crosses a multiple of DT after
+        the boot (scenario time 0)."""
+        boot = self.link.boot_s
+        last, going = 0.0, True
+
+        def at_tick(t_fw: float) -> None:
+            nonlocal last, going
+            if not going:
+                return
+            t = round(t_fw - boot, 9)
+            if t <= 0:
+                return
+            last = t
+            going = tick(t)
+
+        while going and last < duration - 1e-9:
+            self.link.frames(self.link.t_fw + DT, at_tick)
+
+    def close(self) -> None:
+        self.link.close()
+        if self.link.tap.version is None:
+            self.link.tap.version = "ArduRover (version not reported)"
+
+    # ----- one tick: the vehicle's side of the radio is the firmware's SERIAL0 itself ---------------------------
+    def frames(self, t: float) -> list[bytes]:
+        """Everything the firmware said since the last tick."""
+        return self.link.drain(t)
+
+    def receive(self, frames: list[tuple[bytes, str]], t: float) -> None:
+        """Straight to the firmware, before its next frame."""
+        link = self.link
+        for data, src in frames:
+            if link.fw_addr is not None:
+                link.send(data)
+                if src == self._op_name:
+                    self.heard.append(t)
+
+    def tick(self, t: float) -> None:
+        """Nothing beside the firmware, which runs its own loops between the ticks."""
+
+    def radio_status(self, state: LinkState, t: float) -> None:
+        """The firmware reads no RADIO_STATUS of its own link here: its GCS failsafe hears the radio's frames."""
+
+    # ----- the record ----------------------------------------------------------------------------------------
+    def _firmware_estimate(self) -> tuple[float, float]:
+        est = self.link.tap.estimate
+        return (self.origin[0] + est[0], self.origin[1] + est[1]) if est is not None else (math.nan, math.nan)
+
+    estimate = _firmware_estimate
+
+    def record(self, t: float, pos: tuple[float, float], link: float, rssi: float) -> None:
+        ex, ey = self._firmware_estimate()
+        tap = self.link.tap
+        mode = -1 if tap.mode is None else tap.mode
+        self.rows.append((t, pos[0], pos[1], ex, ey, mode, link, rssi, *self.link.cmd, tap.armed,
+                          self.world.collisions))
+
+    def status(self) -> str:
+        return f"  {MODE_NAMES.get(self.link.tap.mode, '?'):<10}"
+
+    # ----- the figures ---------------------------------------------------------------------------------------
+    @property
+    def firmware_modes(self) -> list[dict]:
+        """Its mode timeline as ArduPilot names the modes (metrics.json's ``firmware_modes``)."""
+        return [{"t": round(t, 3), "mode": MODE_NAMES.get(m, str(m))} for t, m in self.link.tap.modes]
+
+    def figures(self, run) -> dict:
+        return metrics.figures(run)
+
+    def summary(self, run, m: dict) -> str:
+        return metrics.summary(run, m)
