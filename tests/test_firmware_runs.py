@@ -115,6 +115,14 @@ def test_differing_sees_a_real_difference_and_forgives_jitter(runs):
     moved = {**m, "rest_position": [m["rest_position"][0] + 5, m["rest_position"][1]],
              "firmware_modes": m["firmware_modes"][:-1]}
     assert differing(m, moved) == ["firmware_modes", "rest_position"]
+    # a mode change a second late is the operator's retry; two seconds late, or another mode, is a difference
+    modes = m["firmware_modes"]
+    late = [{**x, "t": x["t"] + 1.0} if i == 1 else x for i, x in enumerate(modes)]
+    later = [{**x, "t": x["t"] + 2.0} if i == 1 else x for i, x in enumerate(modes)]
+    other = [{**x, "mode": "HOLD"} if i == 1 else x for i, x in enumerate(modes)]
+    assert differing(m, {**m, "firmware_modes": late}) == []
+    assert differing(m, {**m, "firmware_modes": later}) == differing(m, {**m, "firmware_modes": other}) == \
+        ["firmware_modes"]
 
 
 def test_two_runs_side_by_side_claim_different_instances(firmware):
