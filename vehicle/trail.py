@@ -64,7 +64,8 @@ class Crumb(NamedTuple):
     speed: float = math.nan  # the ground speed driven when it was laid (m/s), smoothed over a few ticks
 
 
-def _seg_dist(px: float, py: float, ax: float, ay: float, bx: float, by: float) -> float:
+def seg_dist(px: float, py: float, ax: float, ay: float, bx: float, by: float) -> float:
+    """Distance from (px, py) to the segment a-b (also the SmartRTL baseline's loop test, sim/policies/smartrtl.py)."""
     dx, dy = bx - ax, by - ay
     L2 = dx * dx + dy * dy
     if L2 <= 1e-18:
@@ -281,7 +282,7 @@ class Trail:
                     if best != -1 and seg >= best:
                         break
                     f = self._f
-                    if _seg_dist(x, y, f[seg, 0], f[seg, 1], f[seg + 1, 0], f[seg + 1, 1]) >= L:
+                    if seg_dist(x, y, f[seg, 0], f[seg, 1], f[seg + 1, 0], f[seg + 1, 1]) >= L:
                         continue
                     # the trail just behind us is always near: only a return after 3 L of path closes a loop, or a
                     # fold-back (a loop of zero width, which no amount of path makes cross itself)
@@ -335,7 +336,7 @@ class Trail:
         target_free = max(1, self.config.max_points // 8)
         for _ in range(12):
             tol *= 2.0
-            keep[:half] = _douglas_peucker(self._f[:half + 1, :2], tol, self._anchor[:half + 1])[:half]
+            keep[:half] = douglas_peucker(self._f[:half + 1, :2], tol, self._anchor[:half + 1])[:half]
             if n - int(keep.sum()) >= target_free:
                 break
         else:
@@ -364,7 +365,7 @@ class Trail:
         return int(old_to_new[pending_shortcut]) if pending_shortcut >= 0 else -1
 
 
-def _douglas_peucker(pts: np.ndarray, tol: float, anchors: np.ndarray) -> np.ndarray:
+def douglas_peucker(pts: np.ndarray, tol: float, anchors: np.ndarray) -> np.ndarray:
     """Keep-mask of an iterative Douglas-Peucker that never drops anchors (or the two ends)."""
     n = len(pts)
     keep = np.zeros(n, dtype=bool)

@@ -27,7 +27,7 @@ import numpy as np
 from sim.policies.base import Baseline, Command, PathDriver, return_speed
 from vehicle.app import Vehicle
 from vehicle.lease import ExpireReason, Holder
-from vehicle.trail import _douglas_peucker, _seg_dist
+from vehicle.trail import douglas_peucker, seg_dist
 
 SRTL_ACCURACY = 2.0  # m
 SRTL_POINTS = 300
@@ -40,14 +40,14 @@ def _seg_seg_dist(p1: tuple[float, float], p2: tuple[float, float], q1: tuple[fl
                   q2: tuple[float, float]) -> float:
     """Closest distance of two segments that do not cross (SmartRTL's loop test), with the trail's point-segment
     distance."""
-    return min(_seg_dist(*p1, *q1, *q2), _seg_dist(*p2, *q1, *q2), _seg_dist(*q1, *p1, *p2), _seg_dist(*q2, *p1, *p2))
+    return min(seg_dist(*p1, *q1, *q2), seg_dist(*p2, *q1, *q2), seg_dist(*q1, *p1, *p2), seg_dist(*q2, *p1, *p2))
 
 
 def _rdp(pts: list[tuple[float, float]], tol: float) -> list[tuple[float, float]]:
     """Ramer-Douglas-Peucker with the trail's implementation (no anchors but the two ends)."""
     if len(pts) < 3:
         return pts
-    keep = _douglas_peucker(np.array(pts), tol, np.zeros(len(pts), dtype=bool))
+    keep = douglas_peucker(np.array(pts), tol, np.zeros(len(pts), dtype=bool))
     return [p for p, k in zip(pts, keep, strict=True) if k]
 
 
