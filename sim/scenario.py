@@ -263,12 +263,7 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
                       "events", "criteria"))
     r.finite(raw, "")
     name = r.get(raw, "name", "name", str)
-    vehicle = r.get(raw, "vehicle", "vehicle", str, "rover")
-    if vehicle not in ("rover", "legged"):
-        raise r.fail("vehicle", f"must be rover or legged, got {vehicle!r}")
-    seed = r.get(raw, "seed", "seed", int, 1)
-    if not 0 <= seed <= SEED_MAX:
-        raise r.fail("seed", f"must be within 0..{SEED_MAX}, got {seed}")
+    vehicle, seed = _vehicle_and_seed(r, raw)
     bounds, walls, denied, stations = _world(r, raw)
     op = _operator(r, raw, stations)
     return Scenario(
@@ -293,6 +288,17 @@ def _header_line(r: _Reader, table: str) -> int | None:
     """The line of ``[table]`` (or ``[[table]]``, ``[table.x]``)."""
     header = re.compile(rf"^\s*\[+\s*{re.escape(table)}\s*[.\]]")
     return next((i + 1 for i, ln in enumerate(r.lines) if header.match(ln)), None)
+
+
+def _vehicle_and_seed(r: _Reader, raw: dict) -> tuple[str, int]:
+    """The robot and the seed a scenario (drawn or generated) flies with, range-checked."""
+    vehicle = r.get(raw, "vehicle", "vehicle", str, "rover")
+    if vehicle not in ("rover", "legged"):
+        raise r.fail("vehicle", f"must be rover or legged, got {vehicle!r}")
+    seed = r.get(raw, "seed", "seed", int, 1)
+    if not 0 <= seed <= SEED_MAX:
+        raise r.fail("seed", f"must be within 0..{SEED_MAX}, got {seed}")
+    return vehicle, seed
 
 
 def _world(r: _Reader, raw: dict) -> tuple[tuple[float, ...], tuple[Wall, ...], tuple, tuple[Station, ...]]:
@@ -513,12 +519,7 @@ def read_generate(text: str, file: str, families: dict[str, dict[str, tuple[int,
             sizes[name] = r.get(gen, name, f"generate.{name}", int)
             if not lo <= sizes[name] <= hi:
                 raise r.fail(f"generate.{name}", f"must be within {lo}..{hi}, got {sizes[name]}")
-    vehicle = r.get(raw, "vehicle", "vehicle", str, "rover")
-    if vehicle not in ("rover", "legged"):
-        raise r.fail("vehicle", f"must be rover or legged, got {vehicle!r}")
-    seed = r.get(raw, "seed", "seed", int, 1)
-    if not 0 <= seed <= SEED_MAX:
-        raise r.fail("seed", f"must be within 0..{SEED_MAX}, got {seed}")
+    vehicle, seed = _vehicle_and_seed(r, raw)
     duration = r.number(raw, "duration", "duration", None, lo=1.0, hi=36000.0)
     return Generate(file, _header_line(r, "generate"), kind, sizes, seed, vehicle,
                     r.get(raw, "name", "name", str, None), r.get(raw, "description", "description", str, None),

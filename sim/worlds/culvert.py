@@ -23,8 +23,6 @@ Where the figures come from:
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from link.radio import RadioParams
@@ -44,25 +42,11 @@ FACE_HALF_M = 12.0  # m of embankment face either side of the mouth
 FACE_T = 0.4  # m: the headwall's thickness
 
 
-def _centre_line(rng: np.random.Generator, bends: int) -> list[geo.Point]:
-    """Straight runs from the mouth, each bend 30-90 degrees, the heading kept within 90 degrees of straight in."""
-    points, angle = [(0.0, 0.0)], 0.0
-    for k in range(bends + 1):
-        if k:
-            turn = math.radians(float(rng.uniform(*BEND_DEG)))
-            sign = 1.0 if rng.random() < 0.5 else -1.0
-            if abs(angle + sign * turn) > math.pi / 2 + 1e-9:
-                sign = -sign
-            angle += sign * turn
-        points.append(geo.add(points[-1], geo.heading(angle), float(rng.uniform(*RUN_M))))
-    return points
-
-
 def generate(rng: np.random.Generator, bends: int) -> Scenario:
     """One culvert with ``bends`` bends, drawn from ``rng``."""
     pipe = float(rng.choice(PIPES_M))
     thick = pipe / 12 + 0.025
-    line = _centre_line(rng, bends)
+    line = geo.bent_line(rng, bends + 1, BEND_DEG, RUN_M)
     pipe_db, fill_db = float(rng.uniform(*PIPE_DB)), float(rng.uniform(*FILL_DB))
     d = pipe / 2 + thick / 2
     walls = [build.wall(geo.offset(line, d), thick, pipe_db), build.wall(geo.offset(line, -d), thick, pipe_db)]

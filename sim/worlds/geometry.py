@@ -10,8 +10,29 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import numpy as np
 
 Point = tuple[float, float]
+
+
+def bent_line(rng: np.random.Generator, legs: int, bend_deg: tuple[float, float],
+              leg_m: tuple[float, float]) -> list[Point]:
+    """A centre line from (0, 0) heading north: ``legs`` straight legs of ``leg_m`` metres, each bend ``bend_deg``
+    degrees left or right (``rng``: a numpy Generator), the heading kept within 90 degrees of straight in, so the
+    drive never folds back into itself (a culvert's pipe runs, a mine's drifts)."""
+    points, angle = [(0.0, 0.0)], 0.0
+    for k in range(legs):
+        if k:
+            turn = math.radians(float(rng.uniform(*bend_deg)))
+            sign = 1.0 if rng.random() < 0.5 else -1.0
+            if abs(angle + sign * turn) > math.pi / 2 + 1e-9:
+                sign = -sign
+            angle += sign * turn
+        points.append(add(points[-1], heading(angle), float(rng.uniform(*leg_m))))
+    return points
 
 
 def unit(a: Point, b: Point) -> Point:

@@ -49,21 +49,6 @@ FACE_HALF_M = 40.0  # m of hillside either side of the portal
 SPEED = 1.2
 
 
-def _centre_line(rng: np.random.Generator, drifts: int, width: float) -> list[geo.Point]:
-    """The drifts' centre line from the portal: straight legs, each bend 30-90 degrees, the heading kept within
-    90 degrees of straight in, so the drive never folds back into itself."""
-    points, angle = [(0.0, 0.0)], 0.0
-    for k in range(drifts):
-        if k:
-            turn = math.radians(float(rng.uniform(*BEND_DEG)))
-            sign = 1.0 if rng.random() < 0.5 else -1.0
-            if abs(angle + sign * turn) > math.pi / 2 + 1e-9:
-                sign = -sign
-            angle += sign * turn
-        points.append(geo.add(points[-1], geo.heading(angle), float(rng.uniform(*LEG_M))))
-    return points
-
-
 def _crosscuts(rng: np.random.Generator, line: list[geo.Point], width: float) -> list[tuple[int, float, int, float]]:
     """Dead-end crosscuts: (leg, distance along it, side +1 left / -1 right, depth), each square to its drift, away
     from bends and from every other drift."""
@@ -110,7 +95,7 @@ def _side_walls(line: list[geo.Point], width: float, side: int, cuts, db: float)
 def generate(rng: np.random.Generator, drifts: int) -> Scenario:
     """One mine of ``drifts`` straight drifts in a row, drawn from ``rng``."""
     width = float(rng.uniform(*WIDTH_M))
-    line = _centre_line(rng, drifts, width)
+    line = geo.bent_line(rng, drifts, BEND_DEG, LEG_M)
     cuts = _crosscuts(rng, line, width)
     db = float(rng.uniform(*ROCK_DB))
     walls = _side_walls(line, width, 1, cuts, db) + _side_walls(line, width, -1, cuts, db)
