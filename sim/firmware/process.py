@@ -19,7 +19,6 @@ import atexit
 import contextlib
 import ctypes
 import os
-import shutil
 import signal
 import socket
 import subprocess
@@ -28,6 +27,8 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
+
+from sim.child import WorkdirChild
 
 JSON_PORT = 9002  # + 10·instance: where the firmware sends its servo packets (we bind it)
 SIM_IN_PORT = 9003  # + 10·instance: the firmware's own end of the JSON link
@@ -92,7 +93,7 @@ def _die_with_parent() -> None:
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
 
 
-class FirmwareProcess:
+class FirmwareProcess(WorkdirChild):
     """One running firmware: ``start`` it, read ``pid``, ``stop`` it (idempotent). A context manager."""
 
     def __init__(self, binary: Path, instance: int, args: list[str], workdir: Path | None = None) -> None:
@@ -103,10 +104,6 @@ class FirmwareProcess:
         self.workdir = Path(tempfile.mkdtemp(prefix=f"returnlink-fw{instance}-")) if workdir is None else workdir
         self.log_path = self.workdir / "firmware.log"
         self.proc: subprocess.Popen | None = None
-
-    @property
-    def pid(self) -> int | None:
-        return None if self.proc is None else self.proc.pid
 
     @property
     def command(self) -> list[str]:
@@ -124,9 +121,6 @@ class FirmwareProcess:
                 raise FirmwareError(f"cannot start {self.binary}: {e.strerror or e}") from None
         _live.add(self)
         return self
-
-    def alive(self) -> bool:
-        return self.proc is not None and self.proc.poll() is None
 
     def log_tail(self, lines: int = 8) -> str:
         try:
@@ -152,24 +146,8 @@ class FirmwareProcess:
                     pass
             status = proc.returncode
         _live.discard(self)
-        if keep_log is not None and self.log_path.is_file():
-            try:
-                keep_log.parent.mkdir(parents=True, exist_ok=True)
-                shutil.copyfile(self.log_path, keep_log)
-            except OSError:
-                pass
-        self._remove_dir()
+        self._leave(keep_log)
         return status
-
-    def _remove_dir(self) -> None:
-        if self._own_dir:
-            shutil.rmtree(self.workdir, ignore_errors=True)
-
-    def __enter__(self) -> FirmwareProcess:
-        return self.start() if self.proc is None else self
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
 
 
 @contextlib.contextmanager

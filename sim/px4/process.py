@@ -32,7 +32,6 @@ import contextlib
 import ctypes
 import fcntl
 import os
-import shutil
 import signal
 import socket
 import struct
@@ -40,6 +39,8 @@ import subprocess
 import tempfile
 import time
 from pathlib import Path
+
+from sim.child import WorkdirChild
 
 SIM_TCP_PORT = 4560  # + instance: the simulator_mavlink link (PX4 is the client; we listen)
 GCS_UDP_PORT = 18570  # + instance: PX4's GCS MAVLink link binds here
@@ -140,7 +141,7 @@ def param_env(params: dict[str, float]) -> dict[str, str]:
     return out
 
 
-class PX4Process:
+class PX4Process(WorkdirChild):
     """One running PX4: ``start`` it, read ``pid``, ``stop`` it (idempotent). A context manager."""
 
     def __init__(self, px4_dir: Path, instance: int, params: dict[str, float] | None = None,
@@ -152,10 +153,6 @@ class PX4Process:
         self.workdir = Path(tempfile.mkdtemp(prefix=f"returnlink-px4-{instance}-")) if workdir is None else workdir
         self.log_path = self.workdir / "px4.log"
         self.proc: subprocess.Popen | None = None
-
-    @property
-    def pid(self) -> int | None:
-        return None if self.proc is None else self.proc.pid
 
     @property
     def command(self) -> list[str]:
@@ -192,9 +189,6 @@ class PX4Process:
             raise PX4Error(f"cannot start PX4 from {self.px4_dir}: {e.strerror or e}") from None
         _live.add(self)
         return self
-
-    def alive(self) -> bool:
-        return self.proc is not None and self.proc.poll() is None
 
     def log_text(self) -> str:
         try:
@@ -236,24 +230,8 @@ class PX4Process:
             proc.wait()
             status = proc.returncode
         _live.discard(self)
-        if keep_log is not None and self.log_path.is_file():
-            try:
-                keep_log.parent.mkdir(parents=True, exist_ok=True)
-                shutil.copyfile(self.log_path, keep_log)
-            except OSError:
-                pass
-        self._remove_dir()
+        self._leave(keep_log)
         return status
-
-    def _remove_dir(self) -> None:
-        if self._own_dir:
-            shutil.rmtree(self.workdir, ignore_errors=True)
-
-    def __enter__(self) -> PX4Process:
-        return self.start() if self.proc is None else self
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
 
 
 @atexit.register
