@@ -7,8 +7,21 @@ from __future__ import annotations
 
 import contextlib
 import shutil
+import socket
 import subprocess
 from pathlib import Path
+
+
+def port_free(kind: int, port: int) -> bool:
+    """Whether 127.0.0.1:``port`` can be bound for ``kind`` (SOCK_STREAM or SOCK_DGRAM) now."""
+    s = socket.socket(socket.AF_INET, kind)
+    try:
+        s.bind(("127.0.0.1", port))
+        return True
+    except OSError:
+        return False
+    finally:
+        s.close()
 
 
 class WorkdirChild:

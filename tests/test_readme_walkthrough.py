@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from sim.firmware.process import port_free
+from sim.child import port_free
 from tests.ardurover import firmware
 
 pytestmark = [pytest.mark.firmware, pytest.mark.interop]

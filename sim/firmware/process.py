@@ -28,7 +28,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from sim.child import WorkdirChild
+from sim.child import WorkdirChild, port_free
 
 JSON_PORT = 9002  # + 10·instance: where the firmware sends its servo packets (we bind it)
 SIM_IN_PORT = 9003  # + 10·instance: the firmware's own end of the JSON link
@@ -46,18 +46,6 @@ _live: set[FirmwareProcess] = set()
 
 class FirmwareError(RuntimeError):
     """The firmware could not be started, died, restarted, or never became ready; the message says which."""
-
-
-def port_free(kind: int, port: int) -> bool:
-    """Whether 127.0.0.1:``port`` can be bound for ``kind`` (SOCK_STREAM or SOCK_DGRAM) now."""
-    s = socket.socket(socket.AF_INET, kind)
-    try:
-        s.bind(("127.0.0.1", port))
-        return True
-    except OSError:
-        return False
-    finally:
-        s.close()
 
 
 def claim_instance(start: int | None = None) -> tuple[int, socket.socket]:

@@ -40,7 +40,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from sim.child import WorkdirChild
+from sim.child import WorkdirChild, port_free
 
 SIM_TCP_PORT = 4560  # + instance: the simulator_mavlink link (PX4 is the client; we listen)
 GCS_UDP_PORT = 18570  # + instance: PX4's GCS MAVLink link binds here
@@ -64,18 +64,6 @@ _live: set[PX4Process] = set()
 
 class PX4Error(RuntimeError):
     """PX4 could not be started, died, or never became ready; the message says which."""
-
-
-def port_free(kind: int, port: int) -> bool:
-    """Whether 127.0.0.1:``port`` can be bound for ``kind`` (SOCK_STREAM or SOCK_DGRAM) now."""
-    s = socket.socket(socket.AF_INET, kind)
-    try:
-        s.bind(("127.0.0.1", port))
-        return True
-    except OSError:
-        return False
-    finally:
-        s.close()
 
 
 def lock_held(instance: int) -> bool:
