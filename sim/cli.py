@@ -85,15 +85,39 @@ def _parm_file(path: str | None) -> Path | None:
 
 def _policy_for(args: argparse.Namespace, kind: str) -> str:
     """--policy, or the default for the vehicle; a policy the vehicle cannot fly exits 2."""
-    from sim.policies import DEFAULT_FIRMWARE_POLICY, DEFAULT_POLICY, FIRMWARE_VEHICLE, flies
+    from sim.policies import (
+        DEFAULT_FIRMWARE_POLICY,
+        DEFAULT_POLICY,
+        DEFAULT_PX4_POLICY,
+        FIRMWARE_VEHICLE,
+        PX4_FAILSAFE_POLICIES,
+        PX4_VEHICLE,
+        flies,
+        vehicle_for,
+    )
 
-    policy = args.policy or (DEFAULT_FIRMWARE_POLICY if kind == FIRMWARE_VEHICLE else DEFAULT_POLICY)
+    default = {FIRMWARE_VEHICLE: DEFAULT_FIRMWARE_POLICY, PX4_VEHICLE: DEFAULT_PX4_POLICY}.get(kind, DEFAULT_POLICY)
+    policy = args.policy or default
     if not flies(policy, kind):
         if kind == FIRMWARE_VEHICLE:
             raise _fail(f"vehicle {kind} flies the ArduPilot firmware's own failsafes or returnlink beside it: "
                         f"--policy ardupilot-hold, ardupilot-rtl, ardupilot-smartrtl or companion (got {policy})")
-        raise _fail(f"policy {policy} needs the ArduPilot firmware: use --vehicle {FIRMWARE_VEHICLE}")
+        if kind == PX4_VEHICLE:
+            raise _fail(f"vehicle {kind} flies PX4's own data-link failsafe: --policy "
+                        f"{' or '.join(PX4_FAILSAFE_POLICIES)} (got {policy})")
+        need = "the ArduPilot firmware" if vehicle_for(policy) == FIRMWARE_VEHICLE else "PX4"
+        raise _fail(f"policy {policy} needs {need}: use --vehicle {vehicle_for(policy)}")
     return policy
+
+
+def _px4(option: str | None) -> Path:
+    """The PX4 directory (--px4, RETURNLINK_PX4); none, or one that is not a PX4 rover build: exit 2 saying so."""
+    from sim.px4.locate import PX4NotFound, find_px4
+
+    try:
+        return find_px4(option)
+    except PX4NotFound as e:
+        raise _fail(str(e)) from None
 
 
 def _firmware(option: str | None) -> Path:
@@ -108,7 +132,7 @@ def _firmware(option: str | None) -> Path:
 
 def _cmd_sim_run(args: argparse.Namespace) -> int:
     from sim import outputs
-    from sim.policies import FIRMWARE_VEHICLE
+    from sim.policies import FIRMWARE_VEHICLE, PX4_VEHICLE
 
     if args.replay:
         return _cmd_sim_replay(args)
@@ -117,7 +141,10 @@ def _cmd_sim_run(args: argparse.Namespace) -> int:
     sc = _run_overrides(_scenario(args.scenario, args.seed), args)
     kind = args.vehicle or sc.vehicle
     policy = _policy_for(args, kind)
+    if args.px4 and kind != PX4_VEHICLE:
+        raise _fail(f"--px4 goes with --vehicle {PX4_VEHICLE} (got vehicle {kind})")
     firmware = _firmware(args.firmware) if kind == FIRMWARE_VEHICLE else None
+    px4 = _px4(args.px4) if kind == PX4_VEHICLE else None
     seed = sc.seed if args.seed is None else args.seed
     out = Path(args.out) if args.out else Path("out") / f"{sc.name.replace(':', '-')}-{kind}-{seed}"
     _writable_dir(out)
@@ -125,7 +152,11 @@ def _cmd_sim_run(args: argparse.Namespace) -> int:
           f"{sc.duration:g} simulated s", file=sys.stderr)
     from sim.runner import Run
 
-    if firmware is None:
+    if px4 is not None:
+        run = _run_px4(args, sc, seed, policy, px4, out)
+        if isinstance(run, int):
+            return run
+    elif firmware is None:
         run = Run(sc, kind, seed, progress=not args.quiet, policy=policy).run()
     else:
         from sim.firmware.process import FirmwareError, stop_on_terminate
@@ -150,6 +181,32 @@ def _cmd_sim_run(args: argparse.Namespace) -> int:
     print(outputs.summary(run, m))
     print("  wrote " + ", ".join(str(p) for p in paths))
     return 0 if m["passed"] else 1
+
+
+def _run_px4(args: argparse.Namespace, sc, seed: int, policy: str, px4: Path, out: Path):
+    """`sim run --vehicle px4rover`: the run, or the exit code when PX4 failed (2: the PX4 given exits before it
+    ever connects, so it is no usable PX4; 1: it failed later, or never connected within its boot budget; 130:
+    interrupted). PX4 is stopped in every case (the run's ``finally``)."""
+    from sim.firmware.process import stop_on_terminate
+    from sim.px4.locate import ENV
+    from sim.px4.lockstep import PX4Unusable
+    from sim.px4.process import PX4Error
+    from sim.runner import Run
+
+    print(f"returnlink: PX4 {px4}", file=sys.stderr)
+    try:
+        with stop_on_terminate():
+            return Run(sc, "px4rover", seed, progress=not args.quiet, policy=policy, px4=px4,
+                       log_path=out / "px4.log").run()
+    except PX4Unusable as e:
+        raise _fail(f"{px4} is not a PX4 that runs here ({e}); give a working one with --px4 DIR or {ENV}=DIR "
+                    "(a ready one: ../shared/px4/, see its README.md)") from None
+    except PX4Error as e:
+        print(f"returnlink: PX4 failed: {e}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("returnlink: interrupted; PX4 was stopped", file=sys.stderr)
+        return 130
 
 
 def _epochs_file(args: argparse.Namespace):
@@ -221,7 +278,7 @@ def _cmd_sim_replay(args: argparse.Namespace) -> int:
     from sim import outputs
     from sim.campaign.store import JSON_METRICS, TRIALS_FILE, read_rows
     from sim.campaign.trial import same_metrics, simulate, trial_from_row
-    from sim.policies import FIRMWARE_VEHICLE
+    from sim.policies import AUTOPILOT_VEHICLES, FIRMWARE_VEHICLE, PX4_VEHICLE
 
     if args.scenario or args.param or args.plan is not None or args.seed is not None or args.vehicle:
         return _usage_error("--replay takes every input from the stored trial; give no SCENARIO, --seed, "
@@ -241,6 +298,8 @@ def _cmd_sim_replay(args: argparse.Namespace) -> int:
     trial = trial_from_row(row)
     if trial.vehicle == FIRMWARE_VEHICLE:
         trial = replace(trial, firmware=str(_firmware(args.firmware)))
+    elif trial.vehicle == PX4_VEHICLE:
+        trial = replace(trial, firmware=str(_px4(args.px4)))
     out = Path(args.out) if args.out else Path(directory) / "replay" / row["trial_id"]
     print(f"returnlink: replaying trial {row['trial_id']}: {trial.scenario} with the {trial.vehicle} (seed "
           f"{trial.seed}, policy {trial.policy}, params {row['params']})", file=sys.stderr)
@@ -259,7 +318,7 @@ def _cmd_sim_replay(args: argparse.Namespace) -> int:
     stored = {k: (json.loads(v) if isinstance(v, str) and k in JSON_METRICS else v)
               for k, v in row.items() if k in m}
     fresh = json.loads(json.dumps({k: m[k] for k in stored}))
-    if trial.vehicle == FIRMWARE_VEHICLE:
+    if trial.vehicle in AUTOPILOT_VEHICLES:
         from sim.firmware.metrics import differing
 
         differ = [k for k in differing(stored, fresh) if k not in ("scenario", "vehicle", "seed", "policy")]
@@ -267,7 +326,7 @@ def _cmd_sim_replay(args: argparse.Namespace) -> int:
     else:
         differ = [k for k in same_metrics(stored, fresh) if k not in ("scenario", "vehicle", "seed", "policy")]
         same = "metrics identical to the stored trial (real_time_factor aside)"
-    if differ and trial.vehicle == FIRMWARE_VEHICLE:
+    if differ and trial.vehicle in AUTOPILOT_VEHICLES:
         print(f"returnlink: the firmware did not repeat the stored trial exactly: {', '.join(differ)} differ beyond "
               "its repeatability (see sim/firmware/metrics.py: ArduPilot SITL's own threads make a firmware run "
               "repeatable only within a tick or so, and the radio can turn that tick into another outcome)",
@@ -303,7 +362,18 @@ def _cmd_sim_sweep(args: argparse.Namespace) -> int:
 
         firmware = str(_firmware(args.firmware))
         os.environ[ENV] = firmware  # for workers that run a stored trial again (a resumed or retried one)
-        spec = replace(spec, trials=tuple(replace(t, firmware=firmware) for t in spec.trials))
+        spec = replace(spec, trials=tuple(replace(t, firmware=firmware) if t.vehicle == "ardurover" else t
+                                          for t in spec.trials))
+    if any(t.vehicle == "px4rover" for t in spec.trials):
+        import os
+        from dataclasses import replace
+
+        from sim.px4.locate import ENV as PX4_ENV
+
+        px4 = str(_px4(args.px4))
+        os.environ[PX4_ENV] = px4  # for workers that run a stored trial again (a resumed or retried one)
+        spec = replace(spec, trials=tuple(replace(t, firmware=px4) if t.vehicle == "px4rover" else t
+                                          for t in spec.trials))
     out = Path(args.out) if args.out else Path("out") / f"sweep-{Path(args.spec).stem}"
     from link.storage import StoredFileError
     from sim.campaign import sweep
@@ -335,7 +405,14 @@ def _add_sweep_parser(sim) -> None:
     sw.add_argument("--address", help="join a Ray cluster: auto or HOST:PORT (default: a local Ray, started here)")
     sw.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_firmware_option(sw)
+    _add_px4_option(sw)
     sw.set_defaults(func=_cmd_sim_sweep)
+
+
+def _add_px4_option(parser) -> None:
+    parser.add_argument("--px4", metavar="DIR",
+                        help="PX4 rover SITL for vehicle px4rover: a directory holding bin/px4 and etc/ (default: "
+                             "$RETURNLINK_PX4)")
 
 
 def _add_firmware_option(parser) -> None:
@@ -567,17 +644,19 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("scenario", nargs="?", help="a built-in scenario name, gen:KIND (a world generated from the "
                                                 "seed: gen:office, gen:mine, gen:culvert) or a .toml file")
     run.add_argument("--seed", type=types.SEED, help="random seed (default: the scenario's)")
-    run.add_argument("--vehicle", choices=["rover", "legged", "ardurover"],
+    run.add_argument("--vehicle", choices=["rover", "legged", "ardurover", "px4rover"],
                      help="robot model (default: the scenario's); ardurover: the scenario's rover driven by the real "
-                          "ArduPilot firmware")
+                          "ArduPilot firmware; px4rover: driven by the real PX4")
     run.add_argument("--out", help="output directory (default: out/SCENARIO-VEHICLE-SEED)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--policy", choices=POLICY_NAMES,
                      help=f"what the vehicle does when its link is lost: the scenario's plan ({DEFAULT_POLICY}, the "
                           "default), a baseline (docs/architecture.md §9), or with --vehicle ardurover the "
                           "firmware's own failsafe (default ardupilot-smartrtl) or companion: returnlink companion "
-                          "between the radio and the firmware (§11)")
+                          "between the radio and the firmware (§11); with --vehicle px4rover PX4's own data-link "
+                          "failsafe: px4-hold or px4-return (the default; §10.1)")
     _add_firmware_option(run)
+    _add_px4_option(run)
     _add_run_campaign_options(run)
     run.set_defaults(func=_cmd_sim_run)
     _add_sweep_parser(sim)

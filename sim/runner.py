@@ -1,12 +1,12 @@
 """``returnlink sim run``: one scenario in lockstep, as fast as the machine allows, whatever flies it.
 
 One loop for every plant (``sim.plants``: returnlink's vehicle on a pymunk robot, the ArduPilot firmware over its
-JSON backend, the firmware with returnlink companion beside it). Every tick: radio deliveries due -> ground
-stations parse real MAVLink bytes -> timed events and the scripted operator -> the plant hears what the radio
-delivered to it and ticks -> every frame either side sent goes through the radio model (per-packet loss and latency,
-both directions) onto a lockstep bus -> RADIO_STATUS -> the record. (The firmware hears and ticks after the
-stations' radio leg instead: ``Plant.hears_last``.) Nothing reads the wall clock except the real-time-factor
-figure, so the same scenario and seed give the same metrics.
+JSON backend, the firmware with returnlink companion beside it, PX4 over its HIL link). Every tick: radio
+deliveries due -> ground stations parse real MAVLink bytes -> timed events and the scripted operator -> the plant
+hears what the radio delivered to it and ticks -> every frame either side sent goes through the radio model
+(per-packet loss and latency, both directions) onto a lockstep bus -> RADIO_STATUS -> the record. (The autopilots
+hear and tick after the stations' radio leg instead: ``Plant.hears_last``.) Nothing reads the wall clock except the
+real-time-factor figure, so the same scenario and seed give the same metrics.
 
 Every random draw comes from a stream of its own subsystem, derived from the seed by name (the robot, the
 sensors, the shadowing field, each direction of each station's radio link): a run flown under another link-loss
@@ -35,7 +35,7 @@ from sim.jams import Jams, radio_event
 from sim.lease_record import LeaseRecord
 from sim.plants import Plant
 from sim.plants.native import TICK_RATE, NativePlant
-from sim.policies import COMPANION_POLICY, DEFAULT_POLICY, FIRMWARE_VEHICLE
+from sim.policies import COMPANION_POLICY, DEFAULT_POLICY, FIRMWARE_VEHICLE, PX4_VEHICLE
 from sim.scenario import Scenario
 from vehicle.app import DT
 from vehicle.lease import Holder
@@ -90,7 +90,11 @@ def frozen() -> Iterator[None]:
 
 def plant_for(vehicle: str, policy: str) -> type:
     """The plant that flies ``policy`` on ``vehicle``: the ArduPilot firmware's own failsafes, returnlink companion
-    beside it, or returnlink's own vehicle (each refuses a policy it cannot fly, saying why)."""
+    beside it, PX4's own failsafe, or returnlink's own vehicle (each refuses a policy it cannot fly, saying why)."""
+    if vehicle == PX4_VEHICLE:
+        from sim.plants.px4 import PX4Plant
+
+        return PX4Plant
     if vehicle != FIRMWARE_VEHICLE:
         return NativePlant
     if policy == COMPANION_POLICY:

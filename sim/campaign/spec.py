@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from sim.campaign.trial import RADIO_AXES, RADIO_PREFIX, Trial
-from sim.policies import DEFAULT_POLICY, FIRMWARE_VEHICLE, POLICY_NAMES, flies
+from sim.policies import DEFAULT_POLICY, POLICY_NAMES, flies, vehicle_for
 from sim.scenario import BUILTIN, ScenarioError
 from sim.worlds.resolve import PREFIX, generator_text, parse, world_text
 from vehicle.params import BY_NAME, ParamError, validate
@@ -42,7 +42,8 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-VEHICLES = ("rover", "legged", "ardurover")  # ardurover: the real ArduPilot firmware (docs/architecture.md §10)
+# ardurover: the real ArduPilot firmware (docs/architecture.md §10); px4rover: the real PX4 (§10.1)
+VEHICLES = ("rover", "legged", "ardurover", "px4rover")
 FIELDS = ("scenarios", "vehicles", "seeds", "params", "radio", "policies", "timeout_s")
 MAX_TRIALS = 1_000_000  # a typo such as seeds = {from = 1, to = 1e9} is refused before it fills a disk
 DEFAULT_TIMEOUT_S = 600.0
@@ -236,13 +237,13 @@ def parse_spec(text: str, file: str = "<spec>", spec_dir: Path | None = None) ->
     for k, p in enumerate(policies):
         if p not in POLICY_NAMES:
             raise r.fail(f"policies[{k}]", f"unknown policy {p!r} (known: {', '.join(POLICY_NAMES)})")
-    # the grid pairs each policy with the vehicles that can fly it (the firmware's failsafes with the firmware, the
-    # native policies with the native robots), so one spec compares both; a policy no listed vehicle flies is an
-    # error, as is a vehicle no listed policy suits
+    # the grid pairs each policy with the vehicles that can fly it (the ArduPilot firmware's failsafes with that
+    # firmware, PX4's with PX4, the native policies with the native robots), so one spec compares them all; a policy
+    # no listed vehicle flies is an error, as is a vehicle no listed policy suits
     listed = vehicles or [parse(text_, source)[0].vehicle for _, source, text_ in scenarios]
     for k, p in enumerate(policies):
         if not any(flies(p, veh) for veh in listed):
-            need = f"vehicle {FIRMWARE_VEHICLE!r}" if not flies(p, "rover") else "a native vehicle (rover, legged)"
+            need = f"vehicle {vehicle_for(p)!r}" if vehicle_for(p) else "a native vehicle (rover, legged)"
             raise r.fail(f"policies[{k}]", f"policy {p!r} needs {need} in vehicles")
     for k, veh in enumerate(vehicles or []):
         if not any(flies(p, veh) for p in policies):

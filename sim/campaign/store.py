@@ -46,7 +46,7 @@ METRICS = [("sim_duration_s", pa.float64()), ("link_lost_s", pa.float64()), ("re
            ("rest_link_quality", pa.float64()), ("link_cycles", pa.int64()), ("regained_by", pa.string()),
            ("collisions_during_return", pa.int64()), ("return_speed_mps", pa.float64()), ("blocks", pa.string()),
            ("relapses", pa.int64()),
-           # vehicle ardurover only (docs/architecture.md §10): the firmware's version and its mode timeline
+           # vehicles ardurover and px4rover only (docs/architecture.md §10, §10.1): the autopilot's version and modes
            ("firmware", pa.string()), ("firmware_modes", pa.string())]
 OUTCOME = [("status", pa.string()), ("error", pa.string()), ("cpu_s", pa.float64())]
 SCHEMA = pa.schema(INPUTS + METRICS + OUTCOME)

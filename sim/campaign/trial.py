@@ -14,7 +14,7 @@ import math
 import time
 from dataclasses import dataclass, field, replace
 
-from sim.policies import DEFAULT_POLICY, FIRMWARE_VEHICLE
+from sim.policies import DEFAULT_POLICY, FIRMWARE_VEHICLE, PX4_VEHICLE
 
 
 @dataclass(frozen=True)
@@ -29,8 +29,9 @@ class Trial:
     seed: int
     params: tuple[tuple[str, float], ...] = ()
     policy: str = DEFAULT_POLICY
-    # the firmware binary for vehicle ardurover: where it lives on this machine, not what the trial is, so it is
-    # neither hashed nor stored (empty: found again by RETURNLINK_ARDUROVER or PATH where the trial runs)
+    # the firmware binary for vehicle ardurover (the PX4 directory for px4rover): where it lives on this machine, not
+    # what the trial is, so it is neither hashed nor stored (empty: found again by RETURNLINK_ARDUROVER or PATH, or
+    # RETURNLINK_PX4, where the trial runs)
     firmware: str = field(default="", compare=False)
 
     @property
@@ -96,6 +97,10 @@ def simulate(trial: Trial, progress: bool = False):
         from sim.firmware.locate import find_firmware
 
         options["firmware"] = find_firmware(trial.firmware or None)
+    elif trial.vehicle == PX4_VEHICLE:
+        from sim.px4.locate import find_px4
+
+        options["px4"] = find_px4(trial.firmware or None)
     run = Run(scenario_of(trial), trial.vehicle, trial.seed, progress=progress, policy=trial.policy,
               **options).run()
     run.metrics = outputs.compute(run)

@@ -2,6 +2,11 @@
 frame as the native runs, plus ``firmware`` (its version) and ``firmware_modes`` (its mode timeline as ArduPilot
 names the modes); ``sim.metrics.compute`` adds the run's own keys and the one verdict, as for every plant.
 
+PX4 alone (``sim.plants.px4.PX4Plant``) is read the same way, with its own meaning of the modes, which a plant
+states in ``mode_names``, ``return_modes``, ``driving_mode`` and ``home_modes`` (absent: ArduPilot's): its Hold
+(AUTO_LOITER) and Return (AUTO_RTL) are the return modes, Offboard the operator's, Return the one with home as its
+target.
+
 The firmware has no leases, so its link-loss story is read from its modes: a *return episode* begins when it
 switches itself into HOLD, RTL or SMART_RTL (its GCS failsafe; a mode the scripted operator asked for is an
 operator RTL, not a failsafe) and ends when the operator takes control again (GUIDED) or the run ends. From there
@@ -32,18 +37,27 @@ from vehicle.link_watch import GOOD_QUALITY as GOOD_LINK_QUALITY
 FIRMWARE_KEYS = (*KEYS, "firmware", "firmware_modes")
 
 
+def meaning(plant) -> tuple[dict[int, str], frozenset[int], int, tuple[int, ...]]:
+    """What the modes of ``plant``'s autopilot mean: (names, return modes, the operator's driving mode, the return
+    modes whose target is home); ArduPilot's unless the plant says otherwise."""
+    return (getattr(plant, "mode_names", MODE_NAMES), getattr(plant, "return_modes", RETURN_MODES),
+            getattr(plant, "driving_mode", GUIDED), getattr(plant, "home_modes", (RTL, SMART_RTL)))
+
+
 def episodes(plant) -> list[tuple[float, float | None, int]]:
     """(start, end or None, mode) of each return the firmware (``plant``) made on its own: a switch into a return
-    mode from a driving mode that the operator did not ask for; it ends when the mode is GUIDED again."""
+    mode from a driving mode that the operator did not ask for; it ends when the mode is the operator's driving
+    mode (GUIDED, PX4's OFFBOARD) again."""
+    _names, returns, driving, _home = meaning(plant)
     out: list[tuple[float, float | None, int]] = []
     asked = [t for t, text in plant.operator.log if text == "rtl requested"]
     current: list | None = None
     for t, mode in plant.link.tap.modes:
-        if current is None and mode in RETURN_MODES and t > 0:
+        if current is None and mode in returns and t > 0:
             if any(abs(t - a) < 2.0 for a in asked):
                 continue
             current = [t, None, mode]
-        elif current is not None and mode == GUIDED:
+        elif current is not None and mode == driving:
             current[1] = t
             out.append(tuple(current))
             current = None
@@ -67,6 +81,7 @@ def figures(run) -> dict:
     """The figures of ``run`` (a ``sim.runner.Run`` of the firmware plant) read from the firmware's own record: its
     rows, the times it heard its station, its modes (see the module docstring)."""
     plant = run.plant
+    names, _returns, _driving, home_modes = meaning(plant)
     sc, rows, heard = run.scenario, plant.rows, plant.heard
     timeout = plant.lnk_timeout
     good_s = float(sc.params.get("LNK_GOOD_S", 1.5))
@@ -101,7 +116,7 @@ def figures(run) -> dict:
             disp = max(disp, math.dist(rows[k][1:3], start))
         hits = rows[kb][11] - rows[ka][11]
         distance, max_disp, driving, collided = distance + d, max(max_disp, disp), driving + moving, collided + hits
-        blocks.append({"index": i, "command": MODE_NAMES.get(mode, str(mode)), "start_s": rounded(a),
+        blocks.append({"index": i, "command": names.get(mode, str(mode)), "start_s": rounded(a),
                        "end_s": rounded(b), "reason": "OPERATOR" if b is not None else None,
                        "distance_m": rounded(d, 2), "displacement_m": rounded(disp, 2), "limit_m": None})
     rest = quality = regained_by = final_err = None
@@ -115,7 +130,7 @@ def figures(run) -> dict:
                 moved = max((math.dist(rows[k][1:3], rest) for k in range(k_rest, k_of(since) + 1)), default=0.0)
                 regained_by = "operator" if moved > REGAIN_MOVED_M else "return"
         armed = next((r for r in rows if r[10]), None)
-        if first[2] in (RTL, SMART_RTL) and armed is not None:
+        if first[2] in home_modes and armed is not None:
             final_err = math.dist(rest, armed[1:3])
     est = [(r[1], r[2], r[3], r[4]) for r in rows if not math.isnan(r[3])]
     rmse = math.sqrt(sum((a - c) ** 2 + (b - d) ** 2 for a, b, c, d in est) / len(est)) if est else None
@@ -142,7 +157,7 @@ def summary(run, m: dict) -> str:
         return "-" if x is None else f"{x:.{nd}f}{unit}"
 
     lines = [
-        f"returnlink sim run {m['scenario']} --vehicle ardurover --seed {m['seed']} --policy {m['policy']}",
+        f"returnlink sim run {m['scenario']} --vehicle {m['vehicle']} --seed {m['seed']} --policy {m['policy']}",
         f"  firmware {m['firmware']} (booted in {run.plant.link.boot_s:.1f} simulated s before scenario time 0)",
         f"  simulated {f(m['sim_duration_s'], ' s')} at {f(m['real_time_factor'], 'x real time')}",
         f"  link lost at {f(m['link_lost_s'], ' s')}, firmware return began {f(m['return_started_s'], ' s')}"

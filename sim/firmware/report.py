@@ -4,7 +4,9 @@ timeline against the radio link and the distance driven back). A companion run's
 lease, which drives in GUIDED: that is what its pictures mark as the return.
 
 ``run`` is a ``sim.runner.Run`` of a firmware plant, or a ``sim serve`` server of one (``sim.firmware.serve``): both
-have the plant (``run.plant``: its rows, its link, the times it heard its station), the world and the scenario."""
+have the plant (``run.plant``: its rows, its link, the times it heard its station), the world and the scenario. A
+run of PX4 (``sim.plants.px4``) has the same record; its plant names its modes (``mode_names``, ``return_modes``,
+``autopilot``), which default to ArduPilot's."""
 
 from __future__ import annotations
 
@@ -18,7 +20,9 @@ from sim.plots import draw_world, plt, save
 from vehicle.lease import Holder
 
 MODE_COLOURS = {"GUIDED": "tab:green", "HOLD": "tab:orange", "RTL": "tab:red", "SMART_RTL": "tab:blue",
-                "MANUAL": "0.5"}
+                "MANUAL": "0.5",
+                # PX4's nav states (``sim.plants.px4``): Offboard is its GUIDED, AUTO_LOITER its Hold
+                "OFFBOARD": "tab:green", "AUTO_LOITER": "tab:orange", "AUTO_RTL": "tab:red"}
 
 
 def _columns(run) -> dict[str, np.ndarray]:
@@ -34,18 +38,21 @@ def _returning(run, modes: np.ndarray) -> np.ndarray:
     trace = getattr(run, "trace", None)
     if run.plant.leases and trace is not None:
         return np.array(trace.holder, dtype=int) == int(Holder.RETURN_SERVICE)
-    return np.isin(modes, tuple(RETURN_MODES))
+    return np.isin(modes, tuple(getattr(run.plant, "return_modes", RETURN_MODES)))
 
 
 def trajectory(run, path: Path) -> Path:
     c = _columns(run)
     m = run.metrics or {}
+    names = getattr(run.plant, "mode_names", MODE_NAMES)
+    autopilot = getattr(run.plant, "autopilot", "ArduPilot")
     fig, ax = plt.subplots(figsize=(11, 8))
     draw_world(ax, run.world, run.scenario.bounds)
-    ax.plot(c["ey"], c["ex"], color="0.55", lw=0.8, ls="--", label="firmware EKF estimate (true frame via its origin)")
+    estimator = "firmware EKF" if autopilot == "ArduPilot" else f"{autopilot} EKF2"
+    ax.plot(c["ey"], c["ex"], color="0.55", lw=0.8, ls="--", label=f"{estimator} estimate (true frame via its origin)")
     modes = c["mode"].astype(int)
     for k in np.unique(modes):
-        name = MODE_NAMES.get(int(k), str(k))
+        name = names.get(int(k), str(k))
         sel = np.where(modes == k, 1.0, np.nan)
         ax.plot(c["y"] * sel, c["x"] * sel, color=MODE_COLOURS.get(name, "k"), lw=1.6, label=f"true path, {name}")
     companion = run.plant.leases  # returnlink companion beside the firmware
@@ -74,10 +81,12 @@ def timeline(run, path: Path) -> Path:
     fig, axes = plt.subplots(3, 1, figsize=(11, 7), sharex=True, gridspec_kw={"height_ratios": [1.4, 1, 1]})
     ax = axes[0]
     tap = run.plant.link.tap
+    names = getattr(run.plant, "mode_names", MODE_NAMES)
+    autopilot = getattr(run.plant, "autopilot", "ArduPilot")
     seen = sorted({int(k) for k in c["mode"]} | {int(k) for _t, k in tap.modes})
     levels = {k: i for i, k in enumerate(seen)}
     ax.step(t, [levels[int(k)] for k in c["mode"]], where="post", color="tab:purple")
-    ax.set_yticks(range(len(seen)), [MODE_NAMES.get(k, str(k)) for k in seen], fontsize=8)
+    ax.set_yticks(range(len(seen)), [names.get(k, str(k)) for k in seen], fontsize=8)
     for e in (run.metrics or {}).get("firmware_modes", []):
         ax.axvline(e["t"], color="0.8", lw=0.6)
         ax.annotate(e["mode"], (e["t"], 0.98), xycoords=("data", "axes fraction"), fontsize=6, rotation=90,
@@ -104,6 +113,7 @@ def timeline(run, path: Path) -> Path:
     ax.plot(t, np.cumsum(step * returning), color="tab:blue")
     ax.set_ylabel("driven back (m)")
     ax.set_xlabel("simulated time since the firmware was ready (s)")
-    fig.suptitle(f"{run.scenario.name} (ArduPilot {tap.version}, seed {run.seed}, policy {run.policy})")
+    version = tap.version if autopilot != "ArduPilot" else f"ArduPilot {tap.version}"  # PX4's says "PX4 v..."
+    fig.suptitle(f"{run.scenario.name} ({version}, seed {run.seed}, policy {run.policy})")
     return save(fig, path)
 

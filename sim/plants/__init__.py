@@ -1,8 +1,9 @@
 """What flies a scenario, behind one port: the ``Plant`` the one simulator loop (``sim.runner.Run``) drives.
 
-A scenario is flown by one of three plants: ``native`` (returnlink's vehicle on a pymunk robot), ``firmware`` (the
-real ArduPilot Rover firmware over its JSON physics backend, its own failsafes) and ``companion`` (that firmware
-with returnlink companion on its telemetry port). Everything around the plant is the loop's, once for all three:
+A scenario is flown by one of four plants: ``native`` (returnlink's vehicle on a pymunk robot), ``firmware`` (the
+real ArduPilot Rover firmware over its JSON physics backend, its own failsafes), ``companion`` (that firmware
+with returnlink companion on its telemetry port) and ``px4`` (the real PX4 rover over its HIL simulator link, its
+own data-link failsafe). Everything around the plant is the loop's, once for all four:
 simulated time, the radio model and its lockstep bus, the scripted ground stations, the scenario's timed events and
 jams, RADIO_STATUS, the per-tick record, the .tlog, the progress bar; and after the run one metrics pipeline, one
 verdict (``sim.metrics``). So a plant is compared with another in the very same world, packet fates and operator
@@ -34,7 +35,7 @@ class Plant(Protocol):
     record (``record``, ``estimate``). The bracketed step comes before the ground's radio leg, or after
     it when ``hears_last`` (see there)."""
 
-    kind: str  # the vehicle as metrics.json names it (rover, legged, ardurover)
+    kind: str  # the vehicle as metrics.json names it (rover, legged, ardurover, px4rover)
     world: World  # walls, attenuation and the collision count: the radio and the record read it
     robot: Robot  # its pose is the truth: the radio model's position, the record's true path
     frame_offset: tuple[float, float]  # where the vehicle's own frame (its trail, its link map) lies in the true one

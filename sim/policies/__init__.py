@@ -19,16 +19,33 @@ FAILSAFE_POLICIES: tuple[str, ...] = ("ardupilot-hold", "ardupilot-rtl", "ardupi
 # returnlink as a companion computer beside the same firmware (§11), its ground link through the scenario's radio
 COMPANION_POLICY = "companion"
 FIRMWARE_POLICIES: tuple[str, ...] = (*FAILSAFE_POLICIES, COMPANION_POLICY)
-POLICY_NAMES: tuple[str, ...] = NATIVE_POLICIES + FIRMWARE_POLICIES
+# PX4's own data-link failsafe (NAV_DLL_ACT 1 Hold, 2 Return; docs/architecture.md §10.1), flown only by ``px4rover``
+# (returnlink companion beside PX4, §11.2, is a later step: ``companion`` stays the ArduPilot firmware's for now)
+PX4_FAILSAFE_POLICIES: tuple[str, ...] = ("px4-hold", "px4-return")
+POLICY_NAMES: tuple[str, ...] = NATIVE_POLICIES + FIRMWARE_POLICIES + PX4_FAILSAFE_POLICIES
 DEFAULT_POLICY = "returnlink"
 FIRMWARE_VEHICLE = "ardurover"
 DEFAULT_FIRMWARE_POLICY = "ardupilot-smartrtl"
+PX4_VEHICLE = "px4rover"
+DEFAULT_PX4_POLICY = "px4-return"
+AUTOPILOT_VEHICLES: tuple[str, ...] = (FIRMWARE_VEHICLE, PX4_VEHICLE)  # the real autopilots: no returnlink aboard
+
+
+def vehicle_for(policy: str) -> str | None:
+    """The one vehicle that flies ``policy``, or None for a native policy (flown by rover and legged)."""
+    if policy in FIRMWARE_POLICIES:
+        return FIRMWARE_VEHICLE
+    if policy in PX4_FAILSAFE_POLICIES:
+        return PX4_VEHICLE
+    return None
 
 
 def flies(policy: str, vehicle: str) -> bool:
-    """Whether ``vehicle`` can fly ``policy``: the firmware's failsafes and the companion need the firmware, and the
-    firmware has no returnlink onboard to fly the native policies with."""
-    return (policy in FIRMWARE_POLICIES) == (vehicle == FIRMWARE_VEHICLE)
+    """Whether ``vehicle`` can fly ``policy``: the ArduPilot firmware's failsafes and the companion need that
+    firmware, PX4's failsafes need PX4, and neither autopilot has returnlink onboard to fly the native policies
+    with."""
+    needs = vehicle_for(policy)
+    return vehicle == needs if needs is not None else vehicle not in AUTOPILOT_VEHICLES
 
 
 def check_policy(name: str) -> str:
@@ -37,6 +54,8 @@ def check_policy(name: str) -> str:
         what = "returnlink companion beside the ArduPilot firmware" if name == COMPANION_POLICY else \
             "the ArduPilot firmware's own failsafe"
         raise ValueError(f"policy {name!r} is {what}: fly it with vehicle {FIRMWARE_VEHICLE!r}")
+    if name in PX4_FAILSAFE_POLICIES:
+        raise ValueError(f"policy {name!r} is PX4's own data-link failsafe: fly it with vehicle {PX4_VEHICLE!r}")
     if name not in NATIVE_POLICIES:
         raise ValueError(f"unknown policy {name!r}; known: {', '.join(POLICY_NAMES)}")
     return name

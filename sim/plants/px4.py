@@ -1,0 +1,226 @@
+"""The PX4 plant: the real PX4 rover in a scenario's world, flying its own data-link failsafe, for
+``sim.runner.Run`` (``returnlink sim run SCENARIO --vehicle px4rover --policy px4-hold|px4-return``;
+docs/architecture.md §10.1).
+
+The scenario's pymunk rover (walls stay collisions) is driven by PX4's wheel outputs (HIL_ACTUATOR_CONTROLS of
+airframe 1069) through the HIL bridge, in lockstep on HIL_SENSOR time (``sim.px4.lockstep``): the physics steps at
+250 Hz, PX4's clock follows the sensor stream, so simulated time is the physics' own and the run goes as fast as
+both processes allow. Every 20 ms of it the loop's tick runs, exactly as for the ArduPilot plant
+(``sim.plants.firmware``): PX4's GCS MAVLink link (UDP 18570+i, read by a socket of ours) goes through ``link.radio``
+to the ground stations, the scripted operator (``sim.px4.operator``, flying Offboard) and the timed events act, and
+what the stations send goes through the radio to PX4 before the next physics step. Its data-link failsafe hears
+exactly what the radio delivers.
+
+Scenario time 0 is the moment PX4 is ready (``PX4Lockstep.boot``: a home, an EKF2 position, its version said).
+
+PX4's simulated GPS stays on in the scenario's GPS-denied zones, for the ArduPilot plant's reason: the bridge gives
+PX4 no wheel odometry, so without GPS EKF2 would have no position at all (and Offboard position control, Hold and
+Return all need one), while the native vehicle dead-reckons there; switching it off would compare a blind autopilot
+with a dead-reckoning one.
+
+The record is the ArduPilot plant's: rows of (t, true x, true y, est x, est y, nav state, link delivery, rssi, speed
+cmd, yaw rate cmd, armed, collisions so far), the times PX4 heard its station, the nav-state timeline; its figures,
+summary and pictures are the firmware's (``sim.firmware.metrics``, ``sim.firmware.report``), read through the
+attributes that say what the modes mean (``mode_names``, ``return_modes``, ``driving_mode``, ``home_modes``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+from link.mission import Origin
+from link.radio import LinkState, subsystem_rng
+from sim.firmware import metrics
+from sim.jams import RADIO_EVENTS
+from sim.policies import PX4_FAILSAFE_POLICIES, PX4_VEHICLE
+from sim.px4.lockstep import DT, HOLD, NAV_STATES, OFFBOARD, RETURN, PX4Lockstep, nav_state_name
+from sim.px4.operator import RETURN_MODES, PX4Operator
+from sim.robots import make_robot
+from sim.scenario import Event, Scenario, Station
+
+NAV_DLL_ACT = {"px4-hold": 1, "px4-return": 2}  # PX4's data-link loss action per policy: Hold, Return
+COM_OBL_RC_ACT = {"px4-hold": 5, "px4-return": 3}  # its Offboard-loss action: the same Hold (5) or Return (3)
+COM_OF_LOSS_T_MAX = 60.0  # s: the top of COM_OF_LOSS_T's range
+
+
+def px4_params(policy: str, lnk_timeout: float, speed_limit: float) -> dict[str, float]:
+    """What a PX4 run sets on top of the SITL defaults and airframe 1069, and why:
+    - NAV_DLL_ACT per policy (1 Hold, 2 Return) and COM_DL_LOSS_T = the scenario's LNK_TIMEOUT, so PX4 reacts to the
+      silence the native vehicle reacts to. It is a whole number of seconds in PX4: LNK_TIMEOUT rounded up, at least
+      1 (PX4's documented range starts at 5 s, which ground stations enforce and PX4 itself does not).
+    - The Offboard stream dies with the link too: the operator's setpoints ride the same radio as its heartbeat.
+      PX4 then leaves Offboard after COM_OF_LOSS_T (default 1 s) for COM_OBL_RC_ACT (default Position mode, which
+      without sticks falls through to its own fallbacks), long before COM_DL_LOSS_T: the baseline would measure the
+      Offboard-loss fallback, not the data-link failsafe. So COM_OF_LOSS_T is its maximum, 60 s, later than any
+      data-link loss of a scenario with LNK_TIMEOUT below about 55 s, and COM_OBL_RC_ACT is the policy's own
+      action (5 Hold, 3 Return), so a stream lost for that long (or a LNK_TIMEOUT beyond it) still ends in the
+      same behaviour. A patchy stream under a live link also never drops the rover out of Offboard then, as a
+      heartbeat-only ArduPilot GUIDED target never does.
+    - COM_FAIL_ACT_T 0: PX4 first holds COM_FAIL_ACT_T (5 s) before a failsafe action so that a pilot on the sticks
+      can take over; nobody holds sticks here, and the native vehicle's return starts after LNK_TIMEOUT alone.
+    - COM_DISARM_PRFLT -1: PX4 disarms a vehicle that does not "take off" within 10 s of arming; a rover standing
+      at its start while the operator switches to Offboard has not failed a take-off.
+    - RO_SPEED_LIM: PX4 rover's Offboard position target carries no speed (it drives at RO_SPEED_LIM, slowing to
+      stop at the target), so the limit is the fastest speed the scenario's operator drives (its routes' speeds,
+      at most the robot's own top speed); Return drives at it too."""
+    if policy not in NAV_DLL_ACT:
+        raise ValueError(f"policy {policy!r} is not one of {', '.join(NAV_DLL_ACT)}")
+    if not (math.isfinite(lnk_timeout) and lnk_timeout > 0):
+        raise ValueError(f"LNK_TIMEOUT must be a positive number of seconds, got {lnk_timeout!r}")
+    if not (math.isfinite(speed_limit) and speed_limit > 0):
+        raise ValueError(f"the speed limit must be a positive speed, got {speed_limit!r}")
+    return {"NAV_DLL_ACT": NAV_DLL_ACT[policy], "COM_DL_LOSS_T": max(1, math.ceil(lnk_timeout - 1e-9)),
+            "COM_OF_LOSS_T": COM_OF_LOSS_T_MAX, "COM_OBL_RC_ACT": COM_OBL_RC_ACT[policy], "COM_FAIL_ACT_T": 0,
+            "COM_DISARM_PRFLT": -1, "RO_SPEED_LIM": round(speed_limit, 3)}
+
+
+class PX4Plant:
+    """PX4 flying the scenario with its own data-link failsafe (see the module docstring). ``link`` is PX4 in
+    lockstep with ``robot`` (``PX4Lockstep``: its process, its bridge, its ``tap``); ``rows`` its record per tick;
+    ``heard`` the scenario times at which it received a frame from the operator's station."""
+
+    kind = PX4_VEHICLE
+    policies: tuple[str, ...] = PX4_FAILSAFE_POLICIES  # what this plant flies
+    leases = False
+    hears_last = True
+    report = "sim.firmware.report"
+    vehicle = None  # no returnlink aboard
+    stale = 0  # no lease to audit against
+    # what the modes mean, for the firmware's figures and pictures
+    autopilot = "PX4"
+    mode_names = NAV_STATES
+    return_modes = RETURN_MODES
+    driving_mode = OFFBOARD
+    home_modes = (RETURN,)
+
+    def __init__(self, scenario: Scenario, kind: str = PX4_VEHICLE, seed: int | None = None,
+                 policy: str = "px4-return", px4: Path | None = None, log_path: Path | None = None,
+                 accept_timeout_s: float | None = None) -> None:
+        """``px4``: the PX4 directory (``sim.px4.locate.find_px4``); ``accept_timeout_s``: its boot budget, the
+        wall seconds it gets to connect to the simulator link."""
+        if kind != PX4_VEHICLE:
+            raise ValueError(f"vehicle {kind!r} is not PX4 ({PX4_VEHICLE!r})")
+        if policy not in self.policies:
+            raise ValueError(f"policy {policy!r} is not one of {', '.join(self.policies)}")
+        if px4 is None:
+            raise ValueError("no PX4 directory given")
+        self.scenario = sc = scenario
+        self.policy = policy
+        self.seed = sc.seed if seed is None else seed
+        self.world = sc.world()
+        x, y, yaw = sc.start
+        self.robot = make_robot("rover", self.world, x, y, yaw, subsystem_rng(self.seed, "robot"))
+        self.origin = (x, y)
+        self.frame_offset = self.origin  # PX4's local frame (its EKF2 origin, where it got its first fix)
+        self.geo = Origin()  # the scenario frame's (0, 0) on the globe: the bridge's GPS origin
+        self.lnk_timeout = float(sc.params.get("LNK_TIMEOUT", 3.0))
+        speeds = [p[2] for p in (*sc.route, *sc.resume_route)]
+        speed_limit = min(self.robot.max_speed, max(speeds, default=self.robot.max_speed))
+        self.params = px4_params(policy, self.lnk_timeout, speed_limit)
+        # the figures measure the reaction from the timeout PX4 was given (a whole number of seconds)
+        self.lnk_timeout = float(self.params["COM_DL_LOSS_T"])
+        options = {} if accept_timeout_s is None else {"accept_timeout_s": accept_timeout_s}
+        self.link = PX4Lockstep(self.world, self.robot, px4, self.params, self.geo, self.seed, log_path, **options)
+        self.rows: list[tuple] = []
+        self.heard: list[float] = []
+        self.operator: PX4Operator | None = None  # made with the operator's station
+        self._op_name = sc.operator_station
+
+    # ----- the scenario around it ----------------------------------------------------------------------------
+    def station(self, spec: Station, operator: bool) -> tuple[PX4Operator | None, None]:
+        """The operator's station is the scripted operator itself; nobody runs the others."""
+        if not operator:
+            return None, None
+        sc = self.scenario
+        self.operator = PX4Operator(sc.route, sc.resume_route, self.geo, sc.attempts, sysid=spec.sysid)
+        return self.operator, None
+
+    def event(self, ev: Event, st, t: float) -> str | None:
+        """The operator switches to Return when the scenario says so; leases, claims and returnlink parameters mean
+        nothing to PX4: said, not faked."""
+        if ev.action in RADIO_EVENTS:
+            return None
+        if ev.action == "rtl" and st is not None and st.gs is not None:
+            st.gs.request_rtl(t)
+            return None
+        return f"t={ev.t:g} s: event {ev.action!r} does not apply to PX4"
+
+    # ----- time ----------------------------------------------------------------------------------------------
+    def start(self) -> None:
+        self.link.start()
+        self.link.boot()
+
+    def pace(self, tick: Callable[[float], bool], duration: float) -> None:
+        """The physics' time, step by step, with a tick each time it crosses a multiple of DT after the boot
+        (scenario time 0)."""
+        boot = self.link.boot_s
+        last, going = 0.0, True
+
+        def at_tick(t_sim: float) -> None:
+            nonlocal last, going
+            if not going:
+                return
+            t = round(t_sim - boot, 9)
+            if t <= 0:
+                return
+            last = t
+            going = tick(t)
+
+        while going and last < duration - 1e-9:
+            self.link.frames(self.link.t_sim + DT, at_tick)
+
+    def close(self) -> None:
+        self.link.close()
+        if self.link.tap.version is None:
+            self.link.tap.version = "PX4 (version not reported)"
+
+    # ----- one tick: the vehicle's side of the radio is PX4's GCS link itself -----------------------------------
+    def frames(self, t: float) -> list[bytes]:
+        """Everything PX4 said on its GCS link since the last tick."""
+        return self.link.drain(t)
+
+    def receive(self, frames: list[tuple[bytes, str]], t: float) -> None:
+        """Straight to PX4, before its next physics step."""
+        for data, src in frames:
+            self.link.send(data)
+            if src == self._op_name:
+                self.heard.append(t)
+
+    def tick(self, t: float) -> None:
+        """Nothing beside PX4, which runs its own modules between the ticks."""
+
+    def radio_status(self, state: LinkState, t: float) -> None:
+        """PX4 reads no RADIO_STATUS of its own link here: its data-link failsafe hears the radio's frames."""
+
+    # ----- the record ----------------------------------------------------------------------------------------
+    def estimate(self) -> tuple[float, float]:
+        est = self.link.tap.estimate
+        return est if est is not None else (math.nan, math.nan)
+
+    def record(self, t: float, pos: tuple[float, float], link: float, rssi: float) -> None:
+        ex, ey = self.estimate()
+        tap = self.link.tap
+        mode = -1 if tap.mode is None else tap.mode
+        self.rows.append((t, pos[0], pos[1], ex, ey, mode, link, rssi, *self.link.cmd, tap.armed,
+                          self.world.collisions))
+
+    def status(self) -> str:
+        mode = self.link.tap.mode
+        return f"  {'?' if mode is None else nav_state_name(mode):<12}"
+
+    # ----- the figures ---------------------------------------------------------------------------------------
+    @property
+    def firmware_modes(self) -> list[dict]:
+        """Its nav-state timeline as PX4 names the states (metrics.json's ``firmware_modes``)."""
+        return [{"t": round(t, 3), "mode": nav_state_name(m)} for t, m in self.link.tap.modes]
+
+    def figures(self, run) -> dict:
+        return metrics.figures(run)
+
+    def summary(self, run, m: dict) -> str:
+        return metrics.summary(run, m)
+
+
+__all__ = ["HOLD", "OFFBOARD", "RETURN", "PX4Plant", "px4_params"]
