@@ -429,16 +429,19 @@ def stream(rig: Rig, owner, seconds: float, vx: float = 2.0) -> None:
         rig.run(0.1)
 
 
-def test_a_lossy_owner_is_held_once_then_its_holes_are_its_rhythm():
+def test_a_lossy_owners_holes_are_not_its_rhythm():
     rig, owner = driving_north()
-    # the fringe: the owner's stream gets through a second in 2.5 (above LNK_MIN_Q), with 1.5 s holes: longer
-    # than LNK_HOLD_S
+    # the fringe: the owner's 10 Hz stream gets through a second in 2.5 (above LNK_MIN_Q), with 1.5 s holes. The
+    # packets the radio swallowed were sent: the owner's rhythm is its own spacing (a hole's length over the
+    # packets sent in it), so every hole longer than LNK_HOLD_S stops the rover, as the native vehicle's 0.5 s
+    # setpoint time-out does, rather than letting it drive on to a stale target (issue 28: deeper into the fringe,
+    # a longer way back)
     rig.deliver = lambda gs, t: gs is not owner or (t % 2.5) < 1.0
     stream(rig, owner, 10.0)
-    # the first hole is a silence like any other; after it, 1.5 s holes are the owner's rhythm (a hold only
-    # after a longer one), where a fixed LNK_HOLD_S would stop the rover at every hole
-    assert rig.companion.counters["drive_held"] == 1
+    assert rig.companion.counters["drive_held"] >= 3
+    rig.deliver = lambda gs, t: True
+    stream(rig, owner, 1.0)  # heard well again, driving
     rig.deliver = lambda gs, t: gs is not owner
     held, silent_at = rig.companion.counters["drive_held"], rig.t
     assert rig.run(3, lambda: rig.companion.counters["drive_held"] > held)
-    assert rig.t - silent_at <= 1.5 + 0.1
+    assert rig.t - silent_at <= 1.0 + 0.1

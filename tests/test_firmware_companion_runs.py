@@ -155,7 +155,7 @@ def test_a_spec_with_the_companion_validates_and_pairs_it_with_the_firmware():
     spec = load_spec(str(ROOT / "sim" / "campaign" / "specs" / "companion.toml"))
     pairs = {(t.vehicle, t.policy) for t in spec.trials}
     assert pairs == {("rover", "returnlink"), ("ardurover", "companion"), ("ardurover", "ardupilot-smartrtl")}
-    assert len(spec.trials) == 5 * 10 * 3
+    assert len(spec.trials) == 5 * 20 * 3
     assert flies("companion", "ardurover") and not flies("companion", "rover")
     with pytest.raises(SpecError) as e:
         parse_spec('scenarios = ["tunnel"]\nvehicles = ["rover"]\npolicies = ["companion"]\n', "s.toml")

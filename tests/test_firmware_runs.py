@@ -86,26 +86,47 @@ def test_rtl_heads_straight_for_home(runs):
         ((start[1] - home[0]) ** 2 + (start[2] - home[1]) ** 2) ** 0.5 - 3
 
 
-def test_policies_fly_the_same_trace_until_the_failsafe(runs):
-    """Same world, seeds, radio fates and operator: the firmware's failsafe setting is the only difference, and it
-    only acts after the loss, so the true paths agree to the tick until then."""
-    a, b = runs["ardupilot-smartrtl"], runs["ardupilot-hold"]
+def _on_path(p: list[float], rows: list[tuple], until: float) -> float:
+    """How far the point ``p`` lies from a run's true path before ``until``."""
+    return min(math.dist(p, r[1:3]) for r in rows if r[0] < until)
+
+
+def _same_drive(a, b) -> None:
+    """Two runs of one trial drove the same way until the earlier one's failsafe acted, and lost the link on that
+    way: the firmware's own threads (sim/firmware/metrics.py) may move a frame by a tick, a tenth of a metre at the
+    fringe, and where the fringe is a knife edge that tenth can move the last packet heard by most of a second
+    (tunnel, seed 1: 46.06 s or 45.28 s, 0.59 m apart, one run in three); so the moment of the loss is compared as
+    a place on the common path, and the failsafe's reaction to it as a time."""
     t_act = min(a.metrics["return_started_s"], b.metrics["return_started_s"])
-    assert abs(a.metrics["return_started_s"] - b.metrics["return_started_s"]) <= TOLERANCE["s"]
     pairs = [(r, q) for r, q in zip(a.rows, b.rows, strict=False) if r[0] < t_act]
     assert len(pairs) > 1000
     assert max(math.dist(r[1:3], q[1:3]) for r, q in pairs) < 0.25
-    assert a.metrics["loss_position"] == pytest.approx(b.metrics["loss_position"], abs=0.25)
+    assert _on_path(a.metrics["loss_position"], b.rows, t_act) < 0.25
+    assert _on_path(b.metrics["loss_position"], a.rows, t_act) < 0.25
+
+
+def _reaction(m: dict) -> float:
+    return m["return_started_s"] - m["link_lost_s"]
+
+
+def test_policies_fly_the_same_trace_until_the_failsafe(runs):
+    """Same world, seeds, radio fates and operator: the firmware's failsafe setting is the only difference, and it
+    only acts after the loss, so the true paths agree until then (``_same_drive``) and each failsafe answers the
+    loss after the same time."""
+    a, b = runs["ardupilot-smartrtl"], runs["ardupilot-hold"]
+    _same_drive(a, b)
+    assert abs(_reaction(a.metrics) - _reaction(b.metrics)) <= 2 * TOLERANCE["s"]
 
 
 def test_same_seed_flies_the_same_drive_until_the_loss(runs, firmware):
-    """Repeatable within the firmware's own determinism: the drive until the loss and the failsafe's moment agree
-    within TOLERANCE; what follows may not (sim/firmware/metrics.py says why)."""
-    again = metrics.compute(FirmwareRun(load("tunnel"), 1, "ardupilot-smartrtl", firmware, duration=100.0).run())
-    first = runs["ardupilot-smartrtl"].metrics
-    for key in ("link_lost_s", "return_started_s", "loss_position"):
-        assert key not in differing({key: first[key]}, {key: again[key]}), key
-    assert [e["mode"] for e in again["firmware_modes"]][:3] == ["MANUAL", "GUIDED", "SMART_RTL"]
+    """Repeatable within the firmware's own determinism: the drive until the loss and the failsafe's reaction to it
+    agree (``_same_drive``, TOLERANCE); what follows may not (sim/firmware/metrics.py says why)."""
+    again = FirmwareRun(load("tunnel"), 1, "ardupilot-smartrtl", firmware, duration=100.0).run()
+    again.metrics = metrics.compute(again)
+    first = runs["ardupilot-smartrtl"]
+    _same_drive(first, again)
+    assert abs(_reaction(first.metrics) - _reaction(again.metrics)) <= 2 * TOLERANCE["s"]
+    assert [e["mode"] for e in again.metrics["firmware_modes"]][:3] == ["MANUAL", "GUIDED", "SMART_RTL"]
 
 
 def test_differing_sees_a_real_difference_and_forgives_jitter(runs):

@@ -78,9 +78,10 @@ def drive_held(t: float, setpoint_at: float | None, owner_heard: float | None, h
     own business, its velocity targets time out in 3 s). Below that a fixed time trips on sparse senders
     (measured: at 0.7 s the scripted GUIDED operator, a heartbeat a second and a target a metre, was stopped
     between its packets and never got going); above it the owner's own rhythm (``rhythm``: its longest gap
-    between packets over the last RHYTHM_S) keeps a lossy link at the fringe from stopping the rover at every
-    packet it swallows. Measured on companion.toml's five worlds (50 trials each): LNK_HOLD_S 1.25 fixed, P95 to
-    link 6.3-17.2 s; 1.25 with 1.25x the rhythm, 6.3-20.8 s; 1 with the rhythm, 6.3-13.3 s. An owner that sent
+    between its packets over the last RHYTHM_S, the radio's holes taken out: ``Companion._rhythm``) lets an owner
+    that sends sparsely drive. Measured on companion.toml's five worlds (50 trials each): LNK_HOLD_S 1.25 fixed,
+    P95 to link 6.3-17.2 s; 1.25 with 1.25x the rhythm, 6.3-20.8 s; 1 with the rhythm counting the radio's holes,
+    6.3-13.3 s; 1 with the owner's own rhythm, see the README's companion table. An owner that sent
     one goal and then only its heartbeat is not streaming: the autopilot drives on to the goal, and LNK_TIMEOUT
     governs."""
     if hold_s <= 0 or setpoint_at is None or owner_heard is None or owner_heard - setpoint_at > STREAM_S:
@@ -136,6 +137,7 @@ class Companion:
         self.setpoint_at: float | None = None  # the owner's last setpoint forwarded to the autopilot
         self.gaps: deque[tuple[float, float]] = deque()  # (arrival, gap before it) of the owner's recent packets
         self.heard_at: float | None = None  # the owner's last packet, as the rhythm last saw it
+        self.heard_seq: int | None = None  # its unwrapped sequence number (None: not measured)
         self.stopped_at: float | None = None  # the dead-man's last stop (None: not holding)
 
     # ----- input -----------------------------------------------------------------------------------------------
@@ -374,15 +376,22 @@ class Companion:
             self.stopped_at = t
 
     def _rhythm(self, heard: float | None, timeout: float) -> float:
-        """The owner's longest gap between packets over the RHYTHM_S before its last one (0: none known). A gap
-        of LNK_TIMEOUT or more was a loss, not the owner's rhythm."""
+        """The owner's own longest spacing between packets over the RHYTHM_S before its last one (0: none
+        known): each gap between two packets heard, divided by the packets it sent in it (their MAVLink sequence
+        numbers; 1 where they are not measured). A hole the radio made is not the owner's rhythm: the packets it
+        swallowed were sent, and counting the hole let the autopilot drive on to a stale target at the fringe
+        (issue 28, the open field: 6-12 m deeper before the loss, a longer way back). A gap of LNK_TIMEOUT or more
+        was a loss, not a rhythm at all."""
         if heard is None:
             return 0.0
         gaps = self.gaps
         if heard != self.heard_at:
+            seq = self.vehicle.book.link.delivery.newest if self.vehicle is not None else None
             if self.heard_at is not None and heard - self.heard_at < timeout:
-                gaps.append((heard, heard - self.heard_at))
-            self.heard_at = heard
+                sent = 1 if seq is None or self.heard_seq is None else seq - self.heard_seq
+                if sent > 0:
+                    gaps.append((heard, (heard - self.heard_at) / sent))
+            self.heard_at, self.heard_seq = heard, seq
             while gaps and gaps[0][0] < heard - RHYTHM_S:
                 gaps.popleft()
         return max((g for _, g in gaps), default=0.0)
