@@ -78,12 +78,13 @@ def trajectory(run: Run, path: Path) -> Path:
                  f"{'PASSED' if m.get('passed') else 'FAILED'}, back {m.get('distance_back_m')} m")
     handles, labels = ax.get_legend_handles_labels()
     uniq = dict(zip(labels, handles, strict=True))
-    ax.legend(uniq.values(), uniq.keys(), loc="upper left", fontsize=7)
+    ax.legend(uniq.values(), uniq.keys(), loc="upper left", bbox_to_anchor=(1.04, 1.0), borderaxespad=0.0,
+              fontsize=7)  # beside the map: inside, it hid the place where the link was lost
     box = _return_box(run)
     bounds = run.scenario.bounds
     if box is not None and max(box[2] - box[0], box[3] - box[1]) < 0.35 * max(bounds[2] - bounds[0],
                                                                              bounds[3] - bounds[1]):
-        inset = ax.inset_axes((1.04, 0.0, 0.62, 0.62))
+        inset = ax.inset_axes((1.12, 0.0, 0.55, 0.55))
         draw_world(inset, run.world)
         _draw_run(inset, run)
         side = max(box[2] - box[0], box[3] - box[1]) / 2

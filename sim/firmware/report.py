@@ -67,11 +67,12 @@ def trajectory(run, path: Path) -> Path:
         if p:
             ax.plot(p[1], p[0], marker=marker, ms=12, color=colour, mfc="white" if marker == "s" else colour,
                     zorder=9, label=label)
-    ax.set_title(f"{run.scenario.name} (ArduPilot firmware, seed {run.seed}, policy {run.policy}; true frame): "
+    ax.set_title(f"{run.scenario.name} ({autopilot} firmware, seed {run.seed}, policy {run.policy}; true frame): "
                  f"{'PASSED' if m.get('passed') else 'FAILED'}, back {m.get('distance_back_m')} m")
     handles, labels = ax.get_legend_handles_labels()
     uniq = dict(zip(labels, handles, strict=True))
-    ax.legend(uniq.values(), uniq.keys(), loc="upper left", fontsize=7)
+    ax.legend(uniq.values(), uniq.keys(), loc="upper left", bbox_to_anchor=(1.04, 1.0), borderaxespad=0.0,
+              fontsize=7)  # beside the map: inside, it hid the place where the link was lost
     return save(fig, path)
 
 
