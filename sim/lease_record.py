@@ -104,7 +104,7 @@ class LeaseRecord:
             if len(rows) > 1:
                 a = rows[-2]
                 blk.distance += math.hypot(pos[0] - a[1], pos[1] - a[2])
-                if v.command_out != (0.0, 0.0):
+                if v.control.command_out != (0.0, 0.0):
                     blk.driving_s += DT
             blk.collisions = self.world.collisions - blk.collisions0
             blk.max_disp = max(blk.max_disp, math.hypot(pos[0] - blk.start[0], pos[1] - blk.start[1]))
@@ -127,8 +127,8 @@ class LeaseRecord:
                 # every baseline heads for home, where the estimator started: the true start of the run
                 blk.target_true = self._true_of(0) if c.target is not None and self._rows else None
             return
-        st = v.service
-        if st is None or v.service_index != blk.index:
+        st = v.returns.service
+        if st is None or v.returns.index != blk.index:
             return
         if st.route is not None and st.route is not blk.route_obj:
             blk.route_obj = st.route

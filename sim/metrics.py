@@ -119,7 +119,7 @@ def lease_figures(run) -> dict:
         "reaction_latency_s": rounded(reaction, 4), "link_regained_s": rounded(regained),
         "distance_back_m": rounded(distance_back, 2), "max_displacement_m": rounded(max_disp, 2),
         "final_target_error_m": rounded(final_err, 2), "collisions": run.world.collisions,
-        "stale_commands_executed": v.stale_commands_executed + run.audit_stale,
+        "stale_commands_executed": v.control.stale_commands_executed + run.audit_stale,
         "commands_rejected": v.commands_rejected,
         "estimator_rmse_m": rounded(rmse), "trail_points": v.trail.count, "trail_max_deviation_m": rounded(deviation),
         "lease_events": events,

@@ -421,8 +421,8 @@ class Run(LeaseRecord):
         else:
             h = cur.holder
             holder, index, returning = int(h), cur.index, h is Holder.RETURN_SERVICE
-        speed, yaw_rate = v.command_out
-        self.trace.rows.append((t, pos[0], pos[1], ex, ey, holder, index, v.state(), link, rssi, v.link_is_good,
+        speed, yaw_rate = v.control.command_out
+        self.trace.rows.append((t, pos[0], pos[1], ex, ey, holder, index, v.state(), link, rssi, v.control.link_is_good,
                                 speed, yaw_rate))
         if v.setpoint is not None:
             self._audit(v)
@@ -433,7 +433,7 @@ class Run(LeaseRecord):
         robot this tick must carry the lease the vehicle last announced as current (LEASE_EVENT) and come from the
         owner. (The companion runs without teleop: its guard is its router, which its plant audits.)"""
         sp = v.setpoint
-        if sp is None or v.command_out == (0.0, 0.0) or self.announced is None:
+        if sp is None or v.control.command_out == (0.0, 0.0) or self.announced is None:
             return
         if (sp.lease.epoch, sp.lease.path[0]) != self.announced or sp.sender != v.book.owner:
             self.stale_setpoints += 1

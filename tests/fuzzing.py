@@ -219,7 +219,7 @@ class Fuzzer:
 
     def _fault_count(self) -> tuple[int, int]:
         """Faults the vehicle contained (a handler or the return service raised): still bugs to report."""
-        return self.pair.endpoint.counters.handler_faults, self.pair.vehicle.service_faults
+        return self.pair.endpoint.counters.handler_faults, self.pair.vehicle.returns.faults
 
     def run(self, frames: int, owner_share: float = 0.2, every: int = 200, stop_on_first: bool = True) -> Report:
         """Feed ``frames`` frames; the vehicle ticks once every ``every`` frames. Non-owner frames are checked

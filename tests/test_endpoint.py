@@ -189,10 +189,10 @@ def test_teleop_moves_and_dies_with_its_lease():
     assert pair.driver.pose[0] - x0 > 1.5
     pair.gs.stop_streaming()  # the dead-man: no fresh setpoint, the robot stops
     pair.step(2.0)
-    assert abs(pair.vehicle.command_out[0]) < 1e-9
+    assert abs(pair.vehicle.control.command_out[0]) < 1e-9
     pair.gs.drive_manual(0.5, 0.0)
     pair.step(1.0)
-    assert pair.vehicle.command_out[0] == pytest.approx(1.0)
+    assert pair.vehicle.control.command_out[0] == pytest.approx(1.0)
     assert math.isfinite(pair.vehicle.estimator.pose.x)
 
 
@@ -254,12 +254,12 @@ def test_stale_guards_catch_a_setpoint_that_slipped_past_the_lease_check(monkeyp
     monkeypatch.setattr(LeaseBook, "check", lambda self, sender, claim=None: Check(Verdict.EXECUTE, claim))
     v.setpoint = Setpoint(1.0, 0.0, old, pair.t + 5, 255)
     pair.step(0.1)
-    assert v.stale_commands_executed == 1 and v.setpoint is None and v.command_out == (0.0, 0.0)
+    assert v.control.stale_commands_executed == 1 and v.setpoint is None and v.control.command_out == (0.0, 0.0)
 
     run = Run(load("open"))
     run.announced = (old.epoch, old.index + 5)
     fake = SimpleNamespace(setpoint=Setpoint(1.0, 0.0, LeaseId(old.epoch, (old.index,)), 9.0, 255),
-                           command_out=(1.0, 0.0), book=SimpleNamespace(owner=255))
+                           control=SimpleNamespace(command_out=(1.0, 0.0)), book=SimpleNamespace(owner=255))
     run._audit(fake)
     assert run.audit_stale == 1
     fake.setpoint = Setpoint(1.0, 0.0, LeaseId(old.epoch, (old.index + 5,)), 9.0, 200)  # right lease, wrong sender
@@ -277,15 +277,15 @@ def test_a_cleared_setpoint_is_judged_again_once_its_lease_is_gone():
     pair.gs.drive_velocity(1.0, 0.0)
     pair.step(1.0)
     sp = v.setpoint
-    assert sp is not None and sp.speed > 0.0 and v.command_out == (sp.speed, sp.yaw_rate)
+    assert sp is not None and sp.speed > 0.0 and v.control.command_out == (sp.speed, sp.yaw_rate)
     t1, t2 = round(pair.t + DT, 9), round(pair.t + 2 * DT, 9)
     assert t2 <= sp.until  # alive for both ticks below: only its lease can stop it
     v.tick(t1)  # the same book and setpoint: cleared once, the same answer
-    assert v.setpoint is sp and v.command_out == (sp.speed, sp.yaw_rate)
+    assert v.setpoint is sp and v.control.command_out == (sp.speed, sp.yaw_rate)
     assert v.claim(v.book.owner, v.book.epoch, v.book.next_index, t1).executes  # a newer lease: sp's is stale
     assert v.setpoint is sp
     v.tick(t2)
-    assert v.setpoint is None and v.command_out == (0.0, 0.0) and v.stale_commands_executed == 0
+    assert v.setpoint is None and v.control.command_out == (0.0, 0.0) and v.control.stale_commands_executed == 0
 
 
 def test_a_lease_change_is_reported_in_the_tick_it_happens():

@@ -31,13 +31,13 @@ def test_a_fault_in_the_service_step_ends_the_block_holds_and_reports(monkeypatc
     pair.step(1.0)
     v = pair.vehicle
     # both blocks of the chain started and faulted; the chain is over: a fresh, unclaimed operator lease
-    assert v.service_faults == 2
+    assert v.returns.faults == 2
     assert v.book.current.holder is Holder.OPERATOR and not v.book.current.claimed
     assert v.state() == State.AWAITING_CLAIM
     reasons = [ev.reason for ev in v.event_log]
     assert reasons.count(ExpireReason.STUCK) == 2
     pair.step(1.0)  # still running, and still: nothing drives it
-    assert v.command_out == (0.0, 0.0)
+    assert v.control.command_out == (0.0, 0.0)
     assert any("return service fault" in text and "injected fault" in text for _, text in pair.gs.texts)
 
 
@@ -47,8 +47,8 @@ def test_a_fault_when_the_service_starts_is_contained_the_same_way(monkeypatch):
     e = pair.gs.expire()
     pair.until(lambda: e.done, 2, "expire ACK")
     pair.step(1.0)
-    assert pair.vehicle.service_faults == 2 and pair.vehicle.state() == State.AWAITING_CLAIM
-    assert pair.vehicle.command_out == (0.0, 0.0)
+    assert pair.vehicle.returns.faults == 2 and pair.vehicle.state() == State.AWAITING_CLAIM
+    assert pair.vehicle.control.command_out == (0.0, 0.0)
     assert any("ZeroDivisionError" in text for _, text in pair.gs.texts)
 
 

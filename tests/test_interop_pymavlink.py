@@ -70,7 +70,7 @@ def test_second_station_is_refused_and_old_lease_commands_after_takeover(served)
         wait_until(lambda: served.vehicle.commands_rejected >= rejected + 21, 3, "21 counted refusals")
         moved = served.server.driver.pose  # the true pose: the robot did not move an inch
         assert abs(moved[0] - start[0]) < 0.02 and served.vehicle.setpoint is None
-        assert served.vehicle.stale_commands_executed == 0
+        assert served.vehicle.control.stale_commands_executed == 0
     finally:
         alpha.close()
         bravo.close()

@@ -147,6 +147,32 @@ def test_no_two_modules_import_each_other_type_only_imports_included():
     assert [(tangle, _circle(graph, tangle[0])) for tangle in _tangles(graph)] == []
 
 
+# the rooms that talk to the vehicle core through its port (docs/architecture.md §2 "Ports, not a hub")
+PORT_ROOMS = ("vehicle.services", "vehicle.companion", "sim.policies")
+CORE = "vehicle.app"
+
+
+def _importing_the_core(graph: dict[str, set[str]]) -> set[str]:
+    """The modules of the port rooms (a package and everything under it) that import ``vehicle.app``."""
+    return {m for m, found in graph.items()
+            if any(m == room or m.startswith(room + ".") for room in PORT_ROOMS) and CORE in found}
+
+
+def test_the_services_the_companion_and_the_policies_see_the_vehicle_only_through_its_port():
+    """docs/architecture.md §2: no module under vehicle/services/, vehicle/companion/ or sim/policies/ imports
+    vehicle.app, type-only imports included (the same graph as above); they hold a ``vehicle.port.VehiclePort``."""
+    graph = _import_graph()
+    assert all(room in graph for room in PORT_ROOMS)  # the rooms were found
+    offenders = _importing_the_core(graph)
+    assert offenders == set()
+
+
+def test_the_port_check_finds_an_import_of_the_core_in_a_room():
+    graph = {"vehicle.services.x": {"vehicle.app"}, "vehicle.companion": {"vehicle.port"},
+             "sim.policies.y": {"vehicle.port"}, "vehicle.servicesx": {"vehicle.app"}, "sim.runner": {"vehicle.app"}}
+    assert _importing_the_core(graph) == {"vehicle.services.x"}
+
+
 def test_the_import_graph_sees_type_only_local_and_relative_imports_and_finds_circles():
     modules = _project_modules()
     source = ("from typing import TYPE_CHECKING\n"

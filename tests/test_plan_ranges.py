@@ -93,7 +93,7 @@ def test_return_to_link_command_is_denied_naming_the_field(params, needle):
     p = pair.gs.command(mav.MAV_CMD_NAV_RETURN_TO_LINK, *params)
     pair.until(lambda: p.done, 2, "COMMAND_ACK")
     assert p.result == mav.MAV_RESULT_DENIED
-    assert pair.vehicle.book.current == book.current and pair.vehicle.service is None
+    assert pair.vehicle.book.current == book.current and pair.vehicle.returns.service is None
     assert any(needle in text for _, text in pair.gs.texts), pair.gs.texts
 
 

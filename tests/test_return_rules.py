@@ -209,11 +209,11 @@ def test_reordered_or_duplicated_frames_still_make_link_good_crumbs(mode):
     v = pair.vehicle
     pair.endpoint.receive = Scrambled(pair.endpoint.receive, mode)
     drive(pair, 1.0, 15.0)
-    assert v.link_is_good
+    assert v.control.link_is_good
     x_loss = pair.driver.pose[0]
     t_loss = pair.t
     pair.lose = lambda sysid, t: True
     pair.until(lambda: any(r is ExpireReason.COMMS_LOST for _, r in reasons(pair, t_loss)), 5, "COMMS_LOST")
     pair.step(0.1)
-    target = v.service.route.target
+    target = v.returns.service.route.target
     assert target is not None and x_loss - target[0] <= 3.0, (x_loss, target)

@@ -130,7 +130,7 @@ def test_setting_the_current_item_moves_the_start_and_reports_it():
 def test_items_reached_are_reported_once_on_the_next_tick():
     kit = Kit()
     missions, _ = service(kit)
-    kit.vehicle.reached.extend([0, -1, 2])  # (-1: a default block with no item of the plan)
+    kit.vehicle.returns.reached.extend([0, -1, 2])  # (-1: a default block with no item of the plan)
     missions.tick(0.0)
     assert [(m.get_type(), m.seq) for m in kit.replies()] == [("MISSION_ITEM_REACHED", 0), ("MISSION_ITEM_REACHED", 2)]
     missions.tick(0.02)

@@ -1,14 +1,16 @@
 """The vehicle: its command authority over the lease book, the parts it is made of, and the real-time shell.
 
-``Vehicle`` is everything onboard except MAVLink framing; ``vehicle.endpoint.Endpoint`` translates messages into
-its methods. It is the command authority: every state-changing request (take or give up the root, claim or
-expire a lease, arm, hold, teleop, a return plan, a parameter) is decided by the lease book and its effect kept
-here, with what the endpoint must announce. It is made of
+``Vehicle`` is everything onboard except MAVLink framing, and provides the one port every room outside it talks
+through (``vehicle.port.VehiclePort``: the command authority, a status snapshot per tick, the event queue);
+``vehicle.endpoint.Endpoint`` translates messages into its methods. It is the command authority: every
+state-changing request (take or give up the root, claim or expire a lease, arm, hold, teleop, a return plan, a
+parameter) is decided by the lease book and its effect kept here, with what the endpoint must announce. It is made of
 
     control.ControlLoop         the 50 Hz tick: sensors -> estimator -> trail, lease triggers, actuators
     contingency.ReturnDriver    what drives a return-service lease: the plan's service, or an injected behaviour
 
-and reads back their state under the names it always had (``vehicle.estimator``, ``vehicle.service``, ...).
+and what they keep is read where it is kept (``vehicle.control.readings``, ``vehicle.returns.service``, ...) or,
+from outside, in the snapshot (``status()``).
 Time is always an argument and the robot is reached only through ``RobotDriver``, so the same code runs lockstep
 in the simulator, in real time over UDP, or on a real robot. ``run`` is the imperative shell: a clock and a
 transport are passed in.
@@ -20,7 +22,6 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import replace
-from operator import attrgetter
 
 from vehicle.contingency import Contingency, ReturnDriver, blocks_for
 from vehicle.control import ControlLoop
@@ -43,6 +44,7 @@ from vehicle.lease import (
 from vehicle.lease_terms import State, refused
 from vehicle.linkmap import MapConfig
 from vehicle.params import Params
+from vehicle.port import DT, NOTHING, Announcements, Status
 from vehicle.radio_status import STALE_S as RSSI_STALE_S
 from vehicle.service import PlanItem, blocks_from_items, default_plan
 from vehicle.teleop import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, SETPOINT_TTL, Setpoint, velocity_to_command
@@ -50,17 +52,11 @@ from vehicle.teleop import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, SETPOINT_TTL, 
 __all__ = ["DT", "MAX_TELEOP_SPEED", "MAX_TELEOP_YAW_RATE", "SETPOINT_TTL", "Contingency", "Setpoint", "State",
            "Vehicle", "run", "velocity_to_command"]
 
-DT = 0.02  # the control tick: 50 Hz
-
-
-def _part(path: str) -> property:
-    """A read-only ``Vehicle`` attribute kept by one of its parts: ``path`` is ``control.NAME`` or
-    ``returns.NAME``."""
-    return property(attrgetter(path), doc=f"``{path}``")
-
 
 class Vehicle:
-    """The onboard state machine around the pure parts. Mutable: it is the shell that owns the current book."""
+    """The onboard state machine around the pure parts. Mutable: it is the shell that owns the current book.
+
+    It provides ``vehicle.port.VehiclePort``; nothing outside the core changes its fields."""
 
     def __init__(self, driver: RobotDriver, params: Params, pose: tuple[float, float, float], t: float = 0.0,
                  seed: int = 0, boot_epoch: int | None = None, contingency: Contingency | None = None) -> None:
@@ -96,23 +92,90 @@ class Vehicle:
         self.linkmap = self.control.linkmap
         self._map_owner: int | None = None  # whose packets the link map counts (a new owner has its own rate)
         self.rssi_report: tuple[float, float] | None = None  # (t, dBm): the radio's last report of the owner's signal
-        self.reached = self.returns.reached
-
-    # what the parts keep, under the names the endpoint, the telemetry and the simulator read
-    readings = _part("control.readings")
-    last_fix = _part("control.last_fix")
-    last_fix_t = _part("control.last_fix_t")
-    command_out = _part("control.command_out")
-    link_is_good = _part("control.link_is_good")
-    outbound_speed = _part("control.outbound_speed")
-    stale_commands_executed = _part("control.stale_commands_executed")
-    service = _part("returns.service")
-    service_index = _part("returns.index")
-    service_faults = _part("returns.faults")
+        self._ticks = 0  # counts the start and the end of every tick: a snapshot belongs to one stretch between
+        self._status: Status | None = None
+        self._status_tick = -1
 
     def tick(self, t: float) -> tuple[float, float]:
-        """One 50 Hz tick (``ControlLoop.tick``): the speed and yaw rate commanded."""
-        return self.control.tick(t)
+        """One 50 Hz tick (``ControlLoop.tick``): the speed and yaw rate commanded. A snapshot taken before it
+        belongs to the last tick, one taken during it (an injected contingency's) to this one so far."""
+        self._ticks += 1
+        out = self.control.tick(t)
+        self._ticks += 1
+        return out
+
+    # ----- the port: the snapshot and the event queue ------------------------------------------------------
+    def status(self) -> Status:
+        """The snapshot of now (``vehicle.port.Status``), built at most once per tick: it is kept while the tick,
+        the lease book, the arming, the hold, the running block and the estimate are the very objects it was built
+        from (identity checks, no comparison of values), and built again when a command between two ticks changed
+        one of them, so an answer never shows a lease that is gone."""
+        c = self.control
+        pose = c.estimator.pose
+        s = self._status
+        svc = self.returns.service
+        if (s is not None and self._status_tick == self._ticks and s.book is self.book and s.pose is pose
+                and s.block is svc and s.armed == self.armed and s.holding == self.holding):
+            return s
+        r = c.readings
+        fix = r.fix if r is not None else None
+        cont = self.contingency
+        running = svc is not None
+        s = self._status = Status(
+            self.t, pose, r.speed if r is not None else 0.0, r.yaw_rate if r is not None else 0.0, r is not None,
+            fix.std if fix is not None else None, c.estimator.fixes_used, c.last_fix, c.last_fix_t, self.armed,
+            self.holding, cont is not None and cont.holding, self.state(), self.home, self.driver.mav_type,
+            self.book, c.link_is_good, c.outbound_speed, c.command_out, svc,
+            self.returns.displacement(pose.x, pose.y) if running else 0.0,
+            self.returns.route_remaining() if running else 0.0, c.trail.count)
+        self._status_tick = self._ticks
+        return s
+
+    def announce(self, text: str) -> None:
+        """A notice for the ground stations, queued with the core's own."""
+        self.notices.append(text)
+
+    def drain(self) -> Announcements:
+        """The transitions and notices queued since the last drain; the queue is left empty."""
+        if not self.events and not self.notices:  # (most ticks)
+            return NOTHING
+        out = Announcements(tuple(self.events), tuple(self.notices))
+        self.events.clear()
+        self.notices.clear()
+        return out
+
+    def drain_reached(self) -> tuple[int, ...]:
+        """The plan items reached since the last drain; the list is left empty."""
+        reached = self.returns.reached
+        if not reached:
+            return ()
+        out = tuple(reached)
+        reached.clear()
+        return out
+
+    def trail_points(self):
+        """The breadcrumb trail's points (estimate frame), oldest first: an (n, 2) copy."""
+        return self.trail.points()
+
+    def linkmap_cells(self) -> list:
+        """The owner's link over space, cell by cell, for the file a station fetches."""
+        return self.linkmap.cells()
+
+    def param_values(self) -> dict[str, float]:
+        """Every parameter's value now, a copy."""
+        return dict(self.params.values)
+
+    def refused(self) -> None:
+        """A state change refused outside the lease book (the signing gate, a companion's router): counted."""
+        self.commands_rejected += 1
+
+    def bind_key(self) -> None:
+        """A signing key is installed: the root only by an explicit signed request from now on (§4.1)."""
+        self.key_bound = True
+
+    def robot_armed(self, armed: bool) -> None:
+        """The robot reports its own arming (a companion's autopilot): the vehicle follows it."""
+        self.armed = armed
 
     # ----- lease transitions -------------------------------------------------------------------------------
     def apply(self, out: Outcome) -> None:
@@ -141,6 +204,15 @@ class Vehicle:
             self.commands_rejected += 1
             return True
         return False
+
+    def verdict(self, sender: int) -> Check:
+        """What the lease rules say of a state change from ``sender`` under its last claimed lease now; nothing is
+        done or counted."""
+        return self.book.check(sender)
+
+    def grants(self, sender: int, compid: int, t: float) -> bool:
+        """Whether LEASE_AUTOGRANT would make ``sender`` the owner now; nothing is granted."""
+        return sender != self.book.owner and self.book.admit(sender, compid, t, self.seed).book.owner == sender
 
     def _reject(self, chk: Check) -> Check:
         self.commands_rejected += 1
@@ -254,6 +326,10 @@ class Vehicle:
                 self.setpoint = None
 
     # ----- the return plan and the parameters --------------------------------------------------------------
+    def plan_leases(self) -> int:
+        """How many execution leases the stored return plan makes."""
+        return len(self.book.plan)
+
     def set_plan(self, items: tuple[PlanItem, ...], t: float) -> str | None:
         """A mission upload is the return plan: scheduled as leases behind the operator lease. Returns why not."""
         try:

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Protocol
 
 from vehicle.lease import ExecutionLease, ExpireReason, LeaseBook, Outcome, ServiceBlock
 from vehicle.lease_terms import State
+from vehicle.port import VehiclePort
 from vehicle.returning import Way
 from vehicle.service import NAV_LOITER_TIME, NAV_WAYPOINT, ServiceState
 from vehicle.service import displacement as block_displacement
@@ -32,10 +33,11 @@ if TYPE_CHECKING:
     from vehicle.trail import Trail
 
 
-class Onboard(Protocol):
-    """The vehicle as a return is driven on it: what ``ReturnDriver`` and an injected ``Contingency`` read and change
-    of it. ``vehicle.app.Vehicle`` is the vehicle; it is named here as a protocol, below it, so that the parts it
-    is made of (this module and ``vehicle.control``) do not import it back (docs/architecture.md §2)."""
+class Onboard(VehiclePort, Protocol):
+    """The vehicle as a return is driven on it, from inside the core: what ``ReturnDriver`` reads and changes of
+    it. ``vehicle.app.Vehicle`` is the vehicle; it is named here as a protocol, below it, so that the parts it is
+    made of (this module and ``vehicle.control``) do not import it back (docs/architecture.md §2). An injected
+    ``Contingency`` is outside the core and sees only the port (``VehiclePort``)."""
 
     params: Params
     book: LeaseBook  # the current book: a transition replaces it, through ``apply`` or directly
@@ -62,17 +64,18 @@ class Contingency(Protocol):
 
     The one door for comparing link-loss behaviours on this very vehicle (§9): the lease book, its triggers,
     telemetry and MAVLink stay exactly as they are, only the driving during a return differs. The simulator's
-    baselines (hold, straight-line RTL, SmartRTL, back-up) implement it; a robot leaves it None.
+    baselines (hold, straight-line RTL, SmartRTL, back-up) implement it; a robot leaves it None. It is handed the
+    vehicle's port, as every room outside the core is: it reads the status snapshot and changes nothing.
     """
 
     halts_on_regain: bool  # False: LINK_REGAINED does not end the running block (it runs to its own end)
     holding: bool  # True while its rules keep the robot standing still (reported as HOLDING, not RETURNING)
 
-    def observe(self, vehicle: Onboard, t: float) -> None:
+    def observe(self, vehicle: VehiclePort, t: float) -> None:
         """Every tick, after the estimator: a behaviour that keeps its own memory (SmartRTL's path) records."""
 
-    def drive(self, vehicle: Onboard, t: float, x: float, y: float, yaw: float) -> tuple[float, float,
-                                                                                       ExpireReason | None]:
+    def drive(self, vehicle: VehiclePort, t: float, x: float, y: float, yaw: float) -> tuple[float, float,
+                                                                                           ExpireReason | None]:
         """One tick of the current service lease: speed, yaw rate, and why the block ended (None: running)."""
 
 

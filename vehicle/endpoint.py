@@ -22,8 +22,8 @@ from typing import Any, NamedTuple
 from link.codec import read_frames
 from link.mission import Origin
 from link.signing import Key, sim_stamp
-from vehicle.app import Vehicle
 from vehicle.keystore import KeyStore
+from vehicle.port import VehiclePort
 from vehicle.services.base import Counters, Outbox, Parts, Service, Source, mav, ticks
 from vehicle.services.commands import CommandServer
 from vehicle.services.mission import MissionService
@@ -52,9 +52,10 @@ __all__ = ["COMMANDS", "HANDLED", "Endpoint", "Dispatch", "Forward", "Parts", "v
 
 
 class Endpoint:
-    """MAVLink in, MAVLink out, for one ``Vehicle``: one component, the services ``services(parts)`` builds."""
+    """MAVLink in, MAVLink out, for one vehicle core, seen through its port (``vehicle.port.VehiclePort``): one
+    component, the services ``services(parts)`` builds."""
 
-    def __init__(self, vehicle: Vehicle, sysid: int = 1, compid: int = 1, origin: Origin | None = None,
+    def __init__(self, vehicle: VehiclePort, sysid: int = 1, compid: int = 1, origin: Origin | None = None,
                  boot_t: float = 0.0, param_file: Path | None = None, *, key: Key | None = None,
                  keystore: KeyStore | None = None, stamp: Callable[[float], int] = sim_stamp,
                  services: Callable[[Parts], Iterable[Service]] = vehicle_services, forward: Forward | None = None,
@@ -163,8 +164,9 @@ class Endpoint:
         """Addresses the transport must never drop from its peer table: the owner's and, with a key installed,
         every station signing with it (docs/architecture.md §3.9)."""
         keep = set(self.signed)  # with a key, every station that signs with it (it may become the owner)
-        if self.vehicle.book.owner is not None:
-            keep.add(self.vehicle.book.owner)
+        owner = self.vehicle.status().book.owner
+        if owner is not None:
+            keep.add(owner)
         return [self.sources[s] for s in keep if s in self.sources]
 
     # ----- output --------------------------------------------------------------------------------------------
@@ -184,7 +186,7 @@ class Endpoint:
 
     def close(self, t: float | None = None) -> None:
         """Shutdown: the last signing timestamp goes to disk."""
-        self.signing.save_stamp(self.vehicle.t if t is None else t)
+        self.signing.save_stamp(self.vehicle.status().t if t is None else t)
 
     # ----- what the composed services hold, under the names the simulator and the tests read -------------------
     @property

@@ -3,7 +3,7 @@ against.
 
 Every policy runs on the same vehicle and simulator, so only the policy differs between paired trials: the
 lease book, its COMMS_LOST trigger, telemetry, the radio and the operator's script are the same; a baseline is a
-``vehicle.app.Contingency`` that drives the return-service lease instead of the scenario's return plan.
+``vehicle.contingency.Contingency`` that drives the return-service lease instead of the scenario's return plan.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the command line reads the names without loading the vehicle
-    from vehicle.app import Contingency
+    from vehicle.contingency import Contingency
 
 NATIVE_POLICIES: tuple[str, ...] = ("returnlink", "hold", "rtl", "smartrtl", "backup")
 # the real ArduPilot firmware's own failsafes (docs/architecture.md §10), flown only by vehicle ``ardurover``

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from sim.policies.base import Baseline, Command, PathDriver, return_speed
-from vehicle.app import Vehicle
+from vehicle.port import VehiclePort
 
 
 class Backup(Baseline):
@@ -24,17 +24,17 @@ class Backup(Baseline):
         self.driver: PathDriver | None = None
         self.after_loss = True  # False: an operator's RTL over a good link, which backs up the whole trail
 
-    def begin(self, vehicle: Vehicle, t: float, x: float, y: float) -> None:
+    def begin(self, vehicle: VehiclePort, t: float, x: float, y: float) -> None:
         super().begin(vehicle, t, x, y)
-        trail = vehicle.trail.points()
+        trail = vehicle.trail_points()
         self.route = np.vstack([[[x, y]], trail[::-1]]) if len(trail) else np.array([[x, y]])
         self.target = (float(self.route[-1, 0]), float(self.route[-1, 1]))
         self.driver = PathDriver(self.route, return_speed(vehicle), t)
-        self.after_loss = vehicle.book.link.lost
+        self.after_loss = vehicle.status().book.link.lost
 
-    def tick(self, vehicle: Vehicle, t: float, x: float, y: float, yaw: float) -> Command:
+    def tick(self, vehicle: VehiclePort, t: float, x: float, y: float, yaw: float) -> Command:
         assert self.driver is not None
-        if self.after_loss and vehicle.link_is_good:
+        if self.after_loss and vehicle.status().link_good:
             self.driver.last_progress_at = t  # standing still on purpose is not being stuck
             return 0.0, 0.0, None
         return self.driver.step(vehicle, t, x, y, yaw)

@@ -25,8 +25,8 @@ import math
 import numpy as np
 
 from sim.policies.base import Baseline, Command, PathDriver, return_speed
-from vehicle.app import Vehicle
 from vehicle.lease import ExpireReason, Holder
+from vehicle.port import VehiclePort
 from vehicle.trail import douglas_peucker, seg_dist
 
 SRTL_ACCURACY = 2.0  # m
@@ -126,12 +126,13 @@ class SmartRTL(Baseline):
         self.fallback = False  # deactivated: it flew RTL instead
         self.lost_at = 0.0  # when the failsafe condition began (the block started after COMMS_LOST)
 
-    def observe(self, vehicle: Vehicle, t: float) -> None:
-        p = vehicle.estimator.pose
-        cur = vehicle.book.current
+    def observe(self, vehicle: VehiclePort, t: float) -> None:
+        s = vehicle.status()
+        p = s.pose
+        cur = s.book.current
         if self.returning and (cur is None or cur.holder is Holder.OPERATOR):
             self.finished(vehicle, t)  # taken back by the operator before it ended
-        if not vehicle.armed or self.returning:
+        if not s.armed or self.returning:
             return
         if not self.homed:
             self.path.restart(p.x, p.y)
@@ -143,7 +144,7 @@ class SmartRTL(Baseline):
         """Standing still between COMMS_LOST and the failsafe acting FS_TIMEOUT later."""
         return self.returning and self.driver is None
 
-    def begin(self, vehicle: Vehicle, t: float, x: float, y: float) -> None:
+    def begin(self, vehicle: VehiclePort, t: float, x: float, y: float) -> None:
         """After a link loss SMART_RTL takes over only when the failsafe acts (``_act``); an operator's RTL (the
         mode switched by hand) takes over at once."""
         self.driver = None
@@ -153,12 +154,12 @@ class SmartRTL(Baseline):
         # packet heard would never act on a marginal link whose lucky packets keep arriving, while the lease book
         # has already taken the operator's control away
         self.lost_at = t
-        if not vehicle.book.link.lost:
+        if not vehicle.status().book.link.lost:
             self._act(vehicle, t, x, y)
 
-    def tick(self, vehicle: Vehicle, t: float, x: float, y: float, yaw: float) -> Command:
+    def tick(self, vehicle: VehiclePort, t: float, x: float, y: float, yaw: float) -> Command:
         if self.driver is None:
-            link = vehicle.book.link
+            link = vehicle.status().book.link
             if not link.lost:
                 return 0.0, 0.0, ExpireReason.COMPLETED  # the heartbeat came back first: the failsafe cleared
             if t + 1e-9 < self.lost_at + self.fs_timeout:
@@ -167,20 +168,21 @@ class SmartRTL(Baseline):
         assert self.driver is not None
         return self.driver.step(vehicle, t, x, y, yaw)
 
-    def _act(self, vehicle: Vehicle, t: float, x: float, y: float) -> None:
+    def _act(self, vehicle: VehiclePort, t: float, x: float, y: float) -> None:
         self.acted.append(t)
         if self.path.active and self.path.points:
             self.path.thorough_cleanup()
             pts = [(x, y)] + self.path.points[::-1]
         else:
             self.fallback = True
-            pts = [(x, y), (float(vehicle.home[0]), float(vehicle.home[1]))]
+            home = vehicle.status().home
+            pts = [(x, y), (float(home[0]), float(home[1]))]
         self.route = np.array(pts)
         self.target = (float(self.route[-1, 0]), float(self.route[-1, 1]))
         self.driver = PathDriver(self.route, return_speed(vehicle), t)
 
-    def finished(self, vehicle: Vehicle, t: float) -> None:
+    def finished(self, vehicle: VehiclePort, t: float) -> None:
         self.returning = False
-        p = vehicle.estimator.pose
+        p = vehicle.status().pose
         if self.path.active and self.homed:
             self.path.restart(p.x, p.y)

@@ -1,13 +1,15 @@
 """The companion's loop: the native vehicle (``Vehicle`` + ``Endpoint``) on an autopilot, with a router in front.
 
 Everything that decides runs the native code: the lease book, the link watch, the trail, the return service and
-navigator live in ``vehicle.app.Vehicle``; component 191 is ``vehicle.endpoint.Endpoint`` composing the native
-microservices (``vehicle.services``) with the companion's identity, the streams it owns and no teleop (``SERVICES``).
-What is added is only what sits between two links: ``router`` decides what of the ground's traffic the autopilot
-may hear, ``AutopilotDriver`` turns the autopilot into the vehicle's robot, and ``GroundVoice`` relays the
-autopilot to the ground. No clock and no socket: bytes come in through ``from_autopilot`` / ``from_ground``,
-go out through the two callables given, and ``tick(t)`` runs the 50 Hz loop at the time it is given, so the same
-object runs under ``returnlink companion`` (wall clock, real links) and in a lockstep simulation.
+navigator live in the native vehicle core, which the companion boots (``vehicle.core``) and then sees only through
+its port (``vehicle.port.VehiclePort``: the command authority, the status snapshot, the event queue); component 191
+is ``vehicle.endpoint.Endpoint`` composing the native microservices (``vehicle.services``) with the companion's
+identity, the streams it owns and no teleop (``SERVICES``). What is added is only what sits between two links:
+``router`` decides what of the ground's traffic the autopilot may hear, ``AutopilotDriver`` turns the autopilot into
+the vehicle's robot, and ``GroundVoice`` relays the autopilot to the ground. No clock and no socket: bytes come in
+through ``from_autopilot`` / ``from_ground``, go out through the two callables given, and ``tick(t)`` runs the 50 Hz
+loop at the time it is given, so the same object runs under ``returnlink companion`` (wall clock, real links) and in
+a lockstep simulation.
 
 The vehicle boots once the autopilot has said where it is (its EKF reports a horizontal position), on that pose,
 so the trail never starts at a made-up origin. Until then reads pass and state changes are answered
@@ -26,15 +28,16 @@ from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from link.mission import Origin
 from link.signing import Key, SigningVerdict, Streams, sim_stamp
-from vehicle.app import Vehicle
 from vehicle.companion import router
 from vehicle.companion.autopilot import AutopilotDriver, is_autopilot_heartbeat, rover_problem
 from vehicle.companion.router import COMPANION_COMPID, Action, Authority, Decision, Dest
 from vehicle.companion.voice import GroundVoice, frame_msgid
+from vehicle.core import boot_core
 from vehicle.endpoint import Endpoint
 from vehicle.keystore import KeyStore, boot_stamp
-from vehicle.lease import ExpireReason, Holder
+from vehicle.lease import ExpireReason, Holder, LeaseBook
 from vehicle.params import Params
+from vehicle.port import VehiclePort
 from vehicle.radio_status import KINDS as RADIO_REPORTS
 from vehicle.radio_status import rssi_dbm
 from vehicle.services.native import vehicle_services
@@ -116,7 +119,7 @@ class Companion:
         self.param_file, self.on_epoch = param_file, on_epoch
         self.autopilot_name = autopilot_name
         self.driver = AutopilotDriver(to_autopilot, pivots)
-        self.vehicle: Vehicle | None = None
+        self.vehicle: VehiclePort | None = None
         self.endpoint: Endpoint | None = None
         saved = keystore.saved_stamp if keystore is not None else None
         self.voice = GroundVoice(self.key, stamp, boot_stamp(saved, stamp(0.0)))
@@ -257,10 +260,10 @@ class Companion:
             return Decision(Action.REFUSE, apm.MAV_RESULT_TEMPORARILY_REJECTED,
                             f"{self.autopilot_name} is not answering")
         keyed = self.key is not None
-        d = router.decide(access, sender, scomp, v.book, t, trusted=trusted, keyed=keyed)
+        d = router.decide(access, sender, scomp, v.status().book, t, trusted=trusted, keyed=keyed)
         if d.kind is Action.ADMIT:
             v.admit(sender, scomp, t)
-            d = router.decide(access, sender, scomp, v.book, t, trusted=trusted, keyed=keyed)
+            d = router.decide(access, sender, scomp, v.status().book, t, trusted=trusted, keyed=keyed)
             if d.kind is Action.ADMIT:  # (cannot happen: the grant was just decided possible)
                 d = Decision(Action.REFUSE, apm.MAV_RESULT_DENIED, "not granted")
         if d.kind is Action.TAKE:
@@ -269,9 +272,9 @@ class Companion:
                 return router.FORWARD
             reason = chk.reason or router.RejectReason.INVALID
             return Decision(Action.REFUSE, router.REJECT_RESULT[reason],
-                            f"{chk.detail or reason.value}; {router.lease_text(v.book)}")
+                            f"{chk.detail or reason.value}; {router.lease_text(v.status().book)}")
         if d.kind is Action.REFUSE and self.vehicle is not None:
-            self.vehicle.commands_rejected += 1  # (take_manual counts its own refusals)
+            self.vehicle.refused()  # (take_manual counts its own refusals)
         return d
 
     def _refuse(self, m, d: Decision, sender: int, scomp: int, t: float) -> None:
@@ -294,7 +297,7 @@ class Companion:
             return
         self.notice_at[key] = t
         if self.vehicle is not None:
-            self.vehicle.notices.append(text)
+            self.vehicle.announce(text)
         elif self.driver.seen.sysid is not None:
             msg = apm.MAVLink_statustext_message(apm.MAV_SEVERITY_WARNING, text.encode()[:50])
             self.to_ground(self.voice.say(self.driver.seen.sysid, COMPANION_COMPID, msg))
@@ -322,15 +325,14 @@ class Companion:
     def _boot(self, t: float) -> None:
         d = self.driver
         origin = Origin(*d.seen.origin) if d.seen.origin is not None else Origin()
-        v = Vehicle(d, self.params, d.pose(), t, seed=self.seed, boot_epoch=self.boot_epoch)
-        v.on_epoch = self.on_epoch
+        v = boot_core(d, self.params, d.pose(), t, seed=self.seed, boot_epoch=self.boot_epoch, on_epoch=self.on_epoch)
         ep = Endpoint(v, sysid=d.seen.sysid or 1, compid=COMPANION_COMPID, origin=origin, boot_t=t,
                       param_file=self.param_file, key=None if self.keystore else self.key, keystore=self.keystore,
                       stamp=self.stamp, services=SERVICES, mav_type=apm.MAV_TYPE_ONBOARD_CONTROLLER,
                       autopilot=apm.MAV_AUTOPILOT_INVALID)
         self.vehicle, self.endpoint = v, ep
         x, y, yaw = d.pose()
-        v.notices.append(f"returnlink companion on {self.autopilot_name}: vehicle at ({x:.1f}, {y:.1f}) m, "
+        v.announce(f"returnlink companion on {self.autopilot_name}: vehicle at ({x:.1f}, {y:.1f}) m, "
                          f"heading {math.degrees(yaw) % 360:.0f} deg")
 
     def _tick_vehicle(self, t: float) -> bool:
@@ -338,31 +340,32 @@ class Companion:
         and the keepalive withheld so the autopilot's failsafe takes over if it keeps failing)."""
         v, d = self.vehicle, self.driver
         assert v is not None
-        v.armed = d.armed
+        v.robot_armed(d.armed)  # the autopilot arms itself: the vehicle follows
         try:
             v.tick(t)
         except Exception as e:  # noqa: BLE001 - reported and withheld from the keepalive, never fatal
             self.notice(0, "tick", f"companion loop fault: {type(e).__name__}: {e}; keepalive withheld", t)
             return False
-        returning = v.book.returning and not self.autopilot_lost
+        book = v.status().book
+        returning = book.returning and not self.autopilot_lost
         if returning and not d.engaged and d.armed:
             self.mode_from_ground = self.preempted = False
             d.engage(t)
         elif not returning and d.engaged:
             d.release(t, hold=not (self.mode_from_ground or self.preempted))
-        rhythm = self._rhythm(v.book.link.last_heard, v.params["LNK_TIMEOUT"])
+        rhythm = self._rhythm(book.link.last_heard, book.link.delivery.newest, v.params["LNK_TIMEOUT"])
         if not returning:
-            self._dead_man(t, rhythm)
+            self._dead_man(t, rhythm, book)
         return True
 
-    def _dead_man(self, t: float, rhythm: float) -> None:
+    def _dead_man(self, t: float, rhythm: float, book: LeaseBook) -> None:
         """Stop the autopilot's drive once the owner driving it with setpoints has fallen silent (``drive_held``):
         a zero-velocity target, repeated every STOP_RESEND s while the silence lasts. The owner's next setpoint
         drives again; a return that follows finds the autopilot in GUIDED and standing."""
         v, d = self.vehicle, self.driver
         assert v is not None
-        heard = v.book.link.last_heard
-        cur = v.book.current
+        heard = book.link.last_heard
+        cur = book.current
         if (cur is None or cur.holder is not Holder.OPERATOR or not d.armed or self.autopilot_lost
                 or not drive_held(t, self.setpoint_at, heard, v.params["LNK_HOLD_S"], rhythm)):
             return
@@ -375,18 +378,17 @@ class Companion:
                                            f"stopped (LNK_HOLD_S)", t)
             self.stopped_at = t
 
-    def _rhythm(self, heard: float | None, timeout: float) -> float:
+    def _rhythm(self, heard: float | None, seq: int | None, timeout: float) -> float:
         """The owner's own longest spacing between packets over the RHYTHM_S before its last one (0: none
         known): each gap between two packets heard, divided by the packets it sent in it (their MAVLink sequence
-        numbers; 1 where they are not measured). A hole the radio made is not the owner's rhythm: the packets it
-        swallowed were sent, and counting the hole let the autopilot drive on to a stale target at the fringe
-        (issue 28, the open field: 6-12 m deeper before the loss, a longer way back). A gap of LNK_TIMEOUT or more
-        was a loss, not a rhythm at all."""
+        numbers, ``seq`` the newest heard; 1 where they are not measured). A hole the radio made is not the
+        owner's rhythm: the packets it swallowed were sent, and counting the hole let the autopilot drive on to a
+        stale target at the fringe (issue 28, the open field: 6-12 m deeper before the loss, a longer way back). A
+        gap of LNK_TIMEOUT or more was a loss, not a rhythm at all."""
         if heard is None:
             return 0.0
         gaps = self.gaps
         if heard != self.heard_at:
-            seq = self.vehicle.book.link.delivery.newest if self.vehicle is not None else None
             if self.heard_at is not None and heard - self.heard_at < timeout:
                 sent = 1 if seq is None or self.heard_seq is None else seq - self.heard_seq
                 if sent > 0:
@@ -416,10 +418,10 @@ class Companion:
     # ----- for the shell -----------------------------------------------------------------------------------------
     def pinned(self) -> list[Hashable]:
         """Ground addresses a transport must keep: the owner's (docs/architecture.md §3.9)."""
-        v = self.vehicle
-        if v is None or v.book.owner is None or v.book.owner not in self.sources:
+        owner = self.vehicle.status().book.owner if self.vehicle is not None else None
+        if owner is None or owner not in self.sources:
             return []
-        return [self.sources[v.book.owner]]
+        return [self.sources[owner]]
 
     def close(self) -> None:
         """Shutdown: the signing timestamp to disk."""

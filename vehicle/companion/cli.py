@@ -29,11 +29,11 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from link import args as types
-from vehicle.app import DT
 from vehicle.companion.app import Companion
 from vehicle.companion.links import Conn, ConnError, Framer, open_link, parse_conn, require_device
 from vehicle.companion.setup import check, differing, report
 from vehicle.companion.tlog import FROM_AUTOPILOT, FROM_GROUND, TO_AUTOPILOT, TO_GROUND, Tlog, TlogError
+from vehicle.port import DT
 
 START_WAIT = 15.0  # s to reach the autopilot and hear its heartbeat
 PARAM_WAIT = 3.0  # s to wait for the autopilot's parameters

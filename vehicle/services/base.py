@@ -15,14 +15,12 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 from link import dialect
 from link.mission import Origin
 from link.wire import NO_INDEX
-
-if TYPE_CHECKING:  # (a type only)
-    from vehicle.app import Vehicle
+from vehicle.port import VehiclePort
 
 mav = dialect.load()
 
@@ -94,12 +92,13 @@ class Counters:
 @dataclass(frozen=True)
 class Parts:
     """What a composition's services are built from (``vehicle.endpoint.Endpoint`` hands it to its factory): the
-    vehicle, the component's voice and counters, the signing service its gate uses, and the component's settings.
+    vehicle's port (``vehicle.port``: no service sees more of the vehicle), the component's voice and counters, the
+    signing service its gate uses, and the component's settings.
 
     The signing service is one of the composition's services to a factory (it ticks and answers SETUP_SIGNING like
     the others); only the endpoint, which built it, uses it as the gate (``vehicle.services.signing.Signing``)."""
 
-    vehicle: Vehicle
+    vehicle: VehiclePort
     out: Outbox
     counters: Counters
     signing: Service

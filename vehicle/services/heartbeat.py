@@ -12,8 +12,9 @@ from __future__ import annotations
 from pymavlink.dialects.v20 import development as modes_wire
 
 from link.wire import MAVLINK_VERSION
-from vehicle.app import State, Vehicle
+from vehicle.lease_terms import State
 from vehicle.modes import AVAILABLE_MODES, custom_mode, standard_mode
+from vehicle.port import VehiclePort
 from vehicle.services.base import mav
 
 MSG_ID_AVAILABLE_MODES = modes_wire.MAVLINK_MSG_ID_AVAILABLE_MODES
@@ -24,9 +25,9 @@ AUTO_STATES = (State.RETURNING, State.NAVIGATING)  # shown with MAV_MODE_FLAG_AU
 class Heartbeat:
     """The identity and mode reports of one component, sent through its encoder ``enc``.
 
-    ``mav_type`` None: the robot's own (``vehicle.driver.mav_type``)."""
+    ``mav_type`` None: the robot's own (the status snapshot's ``mav_type``)."""
 
-    def __init__(self, enc, vehicle: Vehicle, mav_type: int | None = None,
+    def __init__(self, enc, vehicle: VehiclePort, mav_type: int | None = None,
                  autopilot: int = mav.MAV_AUTOPILOT_GENERIC) -> None:
         self.mav = enc
         self.vehicle = vehicle
@@ -34,24 +35,25 @@ class Heartbeat:
         self.autopilot = autopilot
 
     def custom_mode(self) -> int:
-        return custom_mode(self.vehicle.state(), self.vehicle.holding)
+        s = self.vehicle.status()
+        return custom_mode(s.state, s.holding)
 
     def send(self, t: float) -> None:
         """One HEARTBEAT (1 Hz, and on request)."""
-        v = self.vehicle
+        s = self.vehicle.status()
         base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
-        if v.armed:
+        if s.armed:
             base |= mav.MAV_MODE_FLAG_SAFETY_ARMED
-        state = v.state()
+        state = s.state
         if state == State.TELEOP:
             base |= mav.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
         elif state in AUTO_STATES:
             base |= mav.MAV_MODE_FLAG_AUTO_ENABLED
-        system_status = mav.MAV_STATE_ACTIVE if v.armed else mav.MAV_STATE_STANDBY
-        mav_type = v.driver.mav_type if self.mav_type is None else self.mav_type
+        system_status = mav.MAV_STATE_ACTIVE if s.armed else mav.MAV_STATE_STANDBY
+        mav_type = s.mav_type if self.mav_type is None else self.mav_type
         # the message object straight to ``send``, as ``heartbeat_send`` does after ``heartbeat_encode``
-        self.mav.send(mav.MAVLink_heartbeat_message(mav_type, self.autopilot, base, self.custom_mode(), system_status,
-                                                    MAVLINK_VERSION))
+        self.mav.send(mav.MAVLink_heartbeat_message(mav_type, self.autopilot, base, custom_mode(state, s.holding),
+                                                    system_status, MAVLINK_VERSION))
 
     def current_mode(self, t: float) -> None:
         """CURRENT_MODE: sent on every mode change and on request."""

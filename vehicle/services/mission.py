@@ -15,7 +15,7 @@ from collections.abc import Callable
 
 from link.mission import Item, Origin, item_from_message
 from link.plan_items import MISSION_INVALID_PARAM, ItemError, ItemFault, position_scale
-from vehicle.app import Vehicle
+from vehicle.port import VehiclePort
 from vehicle.services.base import Outbox, Reply, Service, Source, command, handles, mav, whole
 from vehicle.services.mission_transfer import ACCEPTED, DENIED, INVALID, UNSUPPORTED, MissionServer, to_plan
 
@@ -33,7 +33,7 @@ class MissionService(Service):
 
     ``report(msgid, t)`` sends one telemetry message now (MISSION_CURRENT after the plan's start moved)."""
 
-    def __init__(self, out: Outbox, vehicle: Vehicle, origin: Origin,
+    def __init__(self, out: Outbox, vehicle: VehiclePort, origin: Origin,
                  report: Callable[[int, float], object] = lambda msgid, t: None) -> None:
         self.out = out
         self.vehicle = vehicle
@@ -50,7 +50,7 @@ class MissionService(Service):
         v = self.vehicle
         v.admit(sender, scomp, t)
         if v.refuses(sender):
-            return DENIED, f"mission from {sender} refused: GCS {v.book.owner} is in control"
+            return DENIED, f"mission from {sender} refused: GCS {v.status().book.owner} is in control"
         return ACCEPTED, ""
 
     def _accept(self, mt: int, items: tuple[Item, ...], sysid: int, compid: int, t: float) -> tuple[int, str]:
@@ -66,7 +66,7 @@ class MissionService(Service):
         error = self.vehicle.set_plan(plan, t)
         if error:
             return UNSUPPORTED, error
-        n = len(self.vehicle.book.plan) if items else 0
+        n = self.vehicle.plan_leases() if items else 0
         self.out.statustext(f"return plan: {len(items)} items, {n} leases" if items else "return plan: default")
         return ACCEPTED, ""
 
@@ -135,11 +135,8 @@ class MissionService(Service):
 
     def tick(self, t: float) -> None:
         """MISSION_ITEM_REACHED for the plan items reached since the last tick; an upload's time-out."""
-        reached = self.vehicle.reached
-        if reached:
-            for seq in reached:
-                if seq >= 0:
-                    self.out.mav.mission_item_reached_send(seq)
-            reached.clear()
+        for seq in self.vehicle.drain_reached():
+            if seq >= 0:
+                self.out.mav.mission_item_reached_send(seq)
         if self.transfer.upload is not None:  # (only an upload in progress has a time-out to run)
             self._say(self.transfer.tick(t))

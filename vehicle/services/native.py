@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from link.linkmap_format import FILE_NAME, encode
-from vehicle.app import Vehicle
+from vehicle.port import VehiclePort
 from vehicle.services.actions import VehicleActions
 from vehicle.services.base import Parts, Service, mav
 from vehicle.services.commands import CommandServer
@@ -40,10 +40,10 @@ def vehicle_services(p: Parts, *, rates: Mapping[int, float] = DEFAULT_RATES, dr
             FtpServer(p.out, vehicle_files(p.vehicle))]
 
 
-def vehicle_files(vehicle: Vehicle) -> Files:
+def vehicle_files(vehicle: VehiclePort) -> Files:
     """What a vehicle offers as files over MAVLink FTP: its link map (docs/architecture.md §6), made when a station
     opens it."""
-    return {FILE_NAME: lambda: encode(vehicle.linkmap.cells())}
+    return {FILE_NAME: lambda: encode(vehicle.linkmap_cells())}
 
 
 # the service classes of the native composition, with the command server every composition has

@@ -9,7 +9,7 @@ and a STATUSTEXT per notice. A companion computer serves the same on its own com
 
 from __future__ import annotations
 
-from vehicle.app import Vehicle
+from vehicle.port import VehiclePort
 from vehicle.services.base import Outbox, Reply, Service, Source, boot_ms, command, mav, whole, wire_index
 from vehicle.services.commands import answer
 
@@ -21,7 +21,7 @@ CLAIM_CURRENT = -1  # LEASE_CLAIM param2: the current operator lease, not yet cl
 class OperatorControl(Service):
     """The root lease and the execution leases as commands, and their transitions as announcements."""
 
-    def __init__(self, out: Outbox, vehicle: Vehicle, boot_t: float = 0.0) -> None:
+    def __init__(self, out: Outbox, vehicle: VehiclePort, boot_t: float = 0.0) -> None:
         self.out = out
         self.vehicle = vehicle
         self.boot_t = boot_t
@@ -38,8 +38,8 @@ class OperatorControl(Service):
         v = self.vehicle
         if p[0] >= 0.5:
             chk = v.acquire(sender, src.compid, t, allow_takeover=p[1] >= 0.5)
-            if chk.executes:
-                return mav.MAV_RESULT_ACCEPTED, v.book.epoch or 0
+            if chk.executes:  # (the lease granted is the new epoch's current one)
+                return mav.MAV_RESULT_ACCEPTED, chk.lease.epoch if chk.lease is not None else 0
             return answer(self.out, chk, "control request", sender)
         return answer(self.out, v.release(sender, t), "release", sender)
 
@@ -65,14 +65,11 @@ class OperatorControl(Service):
         return answer(self.out, self.vehicle.expire(src.sysid, epoch, index, t), "lease expire", src.sysid)
 
     def tick(self, t: float) -> None:
-        """LEASE_EVENT for every transition since the last tick, then a STATUSTEXT for every notice."""
-        v = self.vehicle
-        if not (v.events or v.notices):  # (most ticks have nothing to announce)
-            return
-        for ev in v.events:
+        """LEASE_EVENT for every transition since the last tick, then a STATUSTEXT for every notice: drained from
+        the vehicle's queue, which only it fills."""
+        events, notices = self.vehicle.drain()
+        for ev in events:
             self.out.mav.lease_event_send(boot_ms(ev.t, self.boot_t), ev.epoch, wire_index(ev.expired),
                                           wire_index(ev.current), int(ev.reason), int(ev.holder))
-        v.events.clear()
-        for text in v.notices:
+        for text in notices:
             self.out.statustext(text, mav.MAV_SEVERITY_NOTICE)
-        v.notices.clear()

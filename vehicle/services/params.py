@@ -12,15 +12,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from vehicle.app import Vehicle
 from vehicle.params import SPECS, ParamError, save_parm
+from vehicle.port import VehiclePort
 from vehicle.services.base import Outbox, Service, Source, handles, mav
 
 
 class ParamServer(Service):
     """The vehicle's parameter table over MAVLink; ``param_file`` (None: not saved) keeps accepted values."""
 
-    def __init__(self, out: Outbox, vehicle: Vehicle, param_file: Path | None = None) -> None:
+    def __init__(self, out: Outbox, vehicle: VehiclePort, param_file: Path | None = None) -> None:
         self.out = out
         self.vehicle = vehicle
         self.param_file = param_file
@@ -58,13 +58,13 @@ class ParamServer(Service):
             self.out.statustext(f"param set refused: no parameter {name!r}", mav.MAV_SEVERITY_WARNING)
             return
         if v.refuses(src.sysid):
-            self.out.statustext(f"param set from {src.sysid} refused: GCS {v.book.owner} is in control",
+            self.out.statustext(f"param set from {src.sysid} refused: GCS {v.status().book.owner} is in control",
                                 mav.MAV_SEVERITY_WARNING)
         else:
             try:
                 v.set_param(name, float(m.param_value))
                 if self.param_file is not None:
-                    save_parm(self.param_file, v.params.values)
+                    save_parm(self.param_file, v.param_values())
             except ParamError as e:
                 self.out.statustext(f"param set refused: {e}", mav.MAV_SEVERITY_WARNING)
             except OSError as e:  # in use until the next boot, which will not know it: say so

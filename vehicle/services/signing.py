@@ -17,8 +17,8 @@ from collections.abc import Callable
 from enum import Enum
 
 from link.signing import MAX_TIMESTAMP, Key, SigningVerdict, Streams, advance, enable, sim_stamp, timestamp_of
-from vehicle.app import Vehicle
 from vehicle.keystore import STAMP_SAVE_EVERY, KeyStore, boot_stamp
+from vehicle.port import VehiclePort
 from vehicle.services.base import Outbox, Service, Source, Throttle, handles, mav
 
 REJECT_NOTICE_GAP = 2.0  # s between STATUSTEXTs about refused frames
@@ -62,8 +62,8 @@ class Signing(Service):
     ``keystore`` (which also keeps the key and the timestamp on disk) or ``key`` turns it on; ``stamp(t)`` is the
     signing clock in 10 µs units since 2015 (the wall clock on a real vehicle, simulated time in the simulator)."""
 
-    def __init__(self, out: Outbox, vehicle: Vehicle, boot_t: float = 0.0, stamp: Callable[[float], int] = sim_stamp,
-                 *, key: Key | None = None, keystore: KeyStore | None = None,
+    def __init__(self, out: Outbox, vehicle: VehiclePort, boot_t: float = 0.0,
+                 stamp: Callable[[float], int] = sim_stamp, *, key: Key | None = None, keystore: KeyStore | None = None,
                  verdicts: Counter | None = None) -> None:
         self.out = out
         self.vehicle = vehicle
@@ -84,7 +84,7 @@ class Signing(Service):
         """Sign everything sent from now on and accept state changes only from frames signed with ``key``."""
         self.key = key
         enable(self.out.mav, key, timestamp)
-        self.vehicle.key_bound = True
+        self.vehicle.bind_key()
 
     def timestamp(self, t: float) -> int:
         """Our signing timestamp at ``t``: the clock, or further on if we already used (or accepted) later."""
@@ -114,7 +114,7 @@ class Signing(Service):
         return None
 
     def _refuse(self, m, verdict: SigningVerdict, sender: int, t: float) -> None:
-        self.vehicle.commands_rejected += 1
+        self.vehicle.refused()
         self.refused_since_notice += 1
         if not self.notices.due("refused", t):
             return

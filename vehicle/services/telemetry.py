@@ -3,7 +3,8 @@ home, mission progress, operator control and lease status, each at its own rate,
 commands that ask for telemetry (REQUEST_MESSAGE, GET_HOME_POSITION, REQUEST_AUTOPILOT_CAPABILITIES) or change its
 rates (SET_MESSAGE_INTERVAL, a state change only the owner may make).
 
-Positions come from the estimator, never from ground truth, because that is all a real vehicle knows. A companion
+Everything reported is read from the vehicle's status snapshot (``vehicle.port.Status``), one per tick. Positions
+come from the estimator, never from ground truth, because that is all a real vehicle knows. A companion
 computer composes the same service with its own identity (``mav_type``, ``autopilot``) and only the streams it
 owns (``rates``): its autopilot reports position and attitude itself.
 """
@@ -16,8 +17,9 @@ from collections.abc import Callable, Mapping
 from link.mission import Origin
 from link.wire import NO_INDEX
 from vehicle import modes
-from vehicle.app import State, Vehicle
 from vehicle.lease import Holder
+from vehicle.lease_terms import State
+from vehicle.port import Status, VehiclePort
 from vehicle.services.base import Outbox, Reply, Service, Source, boot_ms, command, mav, whole, wire_index
 from vehicle.services.heartbeat import MSG_ID_AVAILABLE_MODES, MSG_ID_CURRENT_MODE, Heartbeat
 
@@ -54,7 +56,7 @@ class Telemetry(Service):
     generated ``<name>_send`` methods do after ``<name>_encode`` (the defaults are the same:
     tests/test_telemetry_fast_paths.py). ``rates`` are the streams sent unasked and their default intervals."""
 
-    def __init__(self, out: Outbox, vehicle: Vehicle, origin: Origin, boot_t: float,
+    def __init__(self, out: Outbox, vehicle: VehiclePort, origin: Origin, boot_t: float,
                  link_stats: Callable[[], tuple[int, int]], mission_count: Callable[[], int], *,
                  mav_type: int | None = None, autopilot: int = mav.MAV_AUTOPILOT_GENERIC,
                  rates: Mapping[int, float] = DEFAULT_RATES) -> None:
@@ -74,8 +76,8 @@ class Telemetry(Service):
         self.last_status_key: tuple | None = None
         self.last_control_key: tuple | None = None
         self.last_mode: int | None = None
-        self._seen: tuple = (None, None, None, None)  # (book, service, holding, baseline holding) of the keys
-        self._keys_from: tuple = (None,) * 8  # what the keys were last computed from (see _on_change)
+        self._seen: tuple = (None, None, None, None)  # (book, block, holding, baseline holding) of the keys
+        self._keys_from: tuple = (None,) * 6  # what the keys were last computed from (see _on_change)
 
     def boot_ms(self, t: float) -> int:
         return boot_ms(t, self.boot_t)
@@ -107,7 +109,7 @@ class Telemetry(Service):
         them; with nobody owning, any plain client may (MAVSDK and MAVProxy set intervals when they connect)."""
         v = self.vehicle
         if v.refuses(src.sysid):
-            self.out.statustext(f"message interval from {src.sysid} refused: GCS {v.book.owner} is in control",
+            self.out.statustext(f"message interval from {src.sysid} refused: GCS {v.status().book.owner} is in control",
                                 mav.MAV_SEVERITY_WARNING)
             return mav.MAV_RESULT_DENIED, 0
         return (mav.MAV_RESULT_ACCEPTED if self.set_interval(int(p[0]), p[1], t) else mav.MAV_RESULT_DENIED), 0
@@ -130,18 +132,17 @@ class Telemetry(Service):
         return True
 
     def tick(self, t: float) -> None:
-        v = self.vehicle
+        s = self.vehicle.status()
         if t >= self.next_heartbeat:
             self.next_heartbeat = t + HEARTBEAT_PERIOD
             self.heartbeat.send(t)
         seen = self._seen
-        c = v.contingency
-        held = c is not None and c.holding
-        if v.book is not seen[0] or v.service is not seen[1] or v.holding != seen[2] or held != seen[3]:
+        held = s.held
+        if s.book is not seen[0] or s.block is not seen[1] or s.holding != seen[2] or held != seen[3]:
             # most ticks these are the very same objects and nothing can have changed (a baseline's own hold
             # changes the state with no lease change, hence ``held``); the tuple is only built when one did
-            self._seen = (v.book, v.service, v.holding, held)
-            self._on_change(t, held)
+            self._seen = (s.book, s.block, s.holding, held)
+            self._on_change(t, s)
         if t + 1e-9 < self.next_due:
             return
         # one pass: what is due is sent, and the earliest next due time is found on the way (the builders send
@@ -159,44 +160,42 @@ class Telemetry(Service):
                 next_due = due
         self.next_due = next_due
 
-    def _on_change(self, t: float, held: bool) -> None:
+    def _on_change(self, t: float, s: Status) -> None:
         """LEASE_STATUS, MISSION_CURRENT and CONTROL_STATUS due now, and CURRENT_MODE sent, if what they show
         changed.
 
         The keys are functions of the book's leases (the current one is the first), epoch, owner and takeover
-        flag, of the service, of the contingency and of the operator's and the baseline's hold: all immutable or
-        plain values but the contingency, whose hold is watched. Hearing the owner gives a new book with only its
-        link watch changed, a fifth of the ticks: then these are the very same, and the keys are not computed
-        again."""
-        v = self.vehicle
-        b = v.book
+        flag, of the vehicle's state and of the operator's hold: all immutable or plain values. Hearing the owner
+        gives a new book with only its link watch changed, a fifth of the ticks: then these are the very same, and
+        the keys are not computed again."""
+        b = s.book
         k = self._keys_from
         if (b.leases is k[0] and b.epoch == k[1] and b.owner == k[2] and b.takeover_allowed == k[3]
-                and v.service is k[4] and v.holding == k[5] and held == k[6] and v.contingency is k[7]):
+                and s.state == k[4] and s.holding == k[5]):
             return
-        self._keys_from = (b.leases, b.epoch, b.owner, b.takeover_allowed, v.service, v.holding, held,
-                           v.contingency)
-        status_key = self._status_key()
+        self._keys_from = (b.leases, b.epoch, b.owner, b.takeover_allowed, s.state, s.holding)
+        status_key = self._status_key(s)
         if status_key != self.last_status_key:
             self.last_status_key = status_key
             self.due[mav.MAVLINK_MSG_ID_LEASE_STATUS] = t
             self.due[mav.MAVLINK_MSG_ID_MISSION_CURRENT] = t
             self.next_due = t
-        mode = modes.custom_mode(status_key[-1], v.holding)  # teleop or hold can change it with no lease change
+        mode = modes.custom_mode(status_key[-1], s.holding)  # teleop or hold can change it with no lease change
         if mode != self.last_mode:
             self.last_mode = mode
             self._current_mode(t)
-        control_key = (v.book.owner, v.book.takeover_allowed)
+        control_key = (b.owner, b.takeover_allowed)
         if control_key != self.last_control_key:
             self.last_control_key = control_key
             self.due[mav.MAVLINK_MSG_ID_CONTROL_STATUS] = t
             self.next_due = t
 
-    def _status_key(self) -> tuple:
-        b = self.vehicle.book
+    @staticmethod
+    def _status_key(s: Status) -> tuple:
+        b = s.book
         cur = b.current
         return (b.epoch, b.owner, cur.index if cur else None, cur.newest_sub if cur else None,
-                cur.claimed if cur else None, self.vehicle.state())
+                cur.claimed if cur else None, s.state)
 
     def emit(self, msgid: int, t: float) -> bool:
         build = BUILDERS.get(msgid)
@@ -212,8 +211,8 @@ class Telemetry(Service):
         self.heartbeat.send(t)
 
     def _sys_status(self, t: float) -> None:
-        v = self.vehicle
-        gps_ok = v.readings is not None and v.estimator.fixes_used > 0 and self._fix_age(t) < 3.0
+        s = self.vehicle.status()
+        gps_ok = s.sensing and s.fixes_used > 0 and self._fix_age(s, t) < 3.0
         present = HEALTH_SENSORS | mav.MAV_SYS_STATUS_SENSOR_GPS
         # no geofence here, and none breached: the health bit is set as ArduPilot does, or MAVProxy announces
         # "fence breach" on the first SYS_STATUS
@@ -223,42 +222,43 @@ class Telemetry(Service):
         self.mav.send(mav.MAVLink_sys_status_message(present, present, health, 200, 24000, 1000, 90, drop,
                                                      min(bad, 65535), 0, 0, 0, 0))
 
-    def _fix_age(self, t: float) -> float:
-        last = self.vehicle.last_fix_t
+    @staticmethod
+    def _fix_age(s: Status, t: float) -> float:
+        last = s.last_fix_t
         return math.inf if last is None else t - last
 
     def _position(self, t: float) -> None:
-        p = self.vehicle.estimator.pose
+        s = self.vehicle.status()
+        p = s.pose
         lat, lon = self.origin.to_global(p.x, p.y)
-        vx, vy = self._velocity(p.yaw)
+        vx, vy = self._velocity(s.speed, p.yaw)
         hdg = int(math.degrees(p.yaw) % 360 * 100)
         self.mav.send(mav.MAVLink_global_position_int_message(
             self.boot_ms(t), int(lat * 1e7), int(lon * 1e7), int(self.origin.alt * 1000), 0, int(vx * 100),
             int(vy * 100), 0, hdg))
 
-    def _velocity(self, yaw: float) -> tuple[float, float]:
-        """Over the ground at heading ``yaw`` (the pose's, which the caller already holds)."""
-        v = self.vehicle
-        speed = v.readings.speed if v.readings else 0.0
+    @staticmethod
+    def _velocity(speed: float, yaw: float) -> tuple[float, float]:
+        """``speed`` over the ground at heading ``yaw`` (the pose's, which the caller already holds)."""
         return speed * math.cos(yaw), speed * math.sin(yaw)
 
     def _local_position(self, t: float) -> None:
-        p = self.vehicle.estimator.pose
-        vx, vy = self._velocity(p.yaw)
+        s = self.vehicle.status()
+        p = s.pose
+        vx, vy = self._velocity(s.speed, p.yaw)
         self.mav.send(mav.MAVLink_local_position_ned_message(self.boot_ms(t), p.x, p.y, 0.0, vx, vy, 0.0))
 
     def _attitude(self, t: float) -> None:
-        v = self.vehicle
-        rate = v.readings.yaw_rate if v.readings else 0.0
-        self.mav.send(mav.MAVLink_attitude_message(self.boot_ms(t), 0.0, 0.0, v.estimator.pose.yaw, 0.0, 0.0, rate))
+        s = self.vehicle.status()
+        self.mav.send(mav.MAVLink_attitude_message(self.boot_ms(t), 0.0, 0.0, s.pose.yaw, 0.0, 0.0, s.yaw_rate))
 
     def _gps_raw(self, t: float) -> None:
-        v = self.vehicle
-        fix = v.readings.fix if v.readings else None
-        last = v.last_fix
-        fresh = last is not None and self._fix_age(t) < 3.0
+        s = self.vehicle.status()
+        fix_std = s.fix_std
+        last = s.last_fix
+        fresh = last is not None and self._fix_age(s, t) < 3.0
         lat, lon = self.origin.to_global(*(last if fresh else (0.0, 0.0)))
-        eph = int(min(65535, (fix.std if fix else 0.7) * 100)) if fresh else 65535
+        eph = int(min(65535, (fix_std if fix_std is not None else 0.7) * 100)) if fresh else 65535
         self.mav.send(mav.MAVLink_gps_raw_int_message(
             int(t * 1e6), 3 if fresh else 1, int(lat * 1e7) if fresh else 0, int(lon * 1e7) if fresh else 0,
             int(self.origin.alt * 1000) if fresh else 0, eph, 65535, 65535, 65535, 10 if fresh else 0))
@@ -268,7 +268,7 @@ class Telemetry(Service):
                                                              mav.MAV_LANDED_STATE_ON_GROUND))
 
     def _home(self, t: float) -> None:
-        hx, hy = self.vehicle.home
+        hx, hy = self.vehicle.status().home
         lat, lon = self.origin.to_global(hx, hy)
         self.mav.send(mav.MAVLink_home_position_message(int(lat * 1e7), int(lon * 1e7), int(self.origin.alt * 1000),
                                                         hx, hy, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
@@ -279,11 +279,11 @@ class Telemetry(Service):
                                                             [0] * 8, 0, 0, self.mav.srcSystem))
 
     def _mission_current(self, t: float) -> None:
-        v = self.vehicle
+        s = self.vehicle.status()
         total = self.mission_count()
-        st = v.service
+        st = s.block
         seq = st.items[st.item].seq if st is not None and 0 <= st.item < len(st.items) else 0
-        state = mav.MISSION_STATE_ACTIVE if v.state() in (State.RETURNING, State.HOLDING, State.NAVIGATING) \
+        state = mav.MISSION_STATE_ACTIVE if s.state in (State.RETURNING, State.HOLDING, State.NAVIGATING) \
             else (mav.MISSION_STATE_NOT_STARTED if total else mav.MISSION_STATE_NO_MISSION)
         self.mav.send(mav.MAVLink_mission_current_message(max(0, seq), total, state))
 
@@ -291,30 +291,30 @@ class Telemetry(Service):
         self.heartbeat.current_mode(t)
 
     def _control_status(self, t: float) -> None:
-        b = self.vehicle.book
+        b = self.vehicle.status().book
         flags = mav.GCS_CONTROL_STATUS_FLAGS_SYSTEM_MANAGER
         if b.takeover_allowed:
             flags |= mav.GCS_CONTROL_STATUS_FLAGS_TAKEOVER_ALLOWED
         self.mav.send(mav.MAVLink_control_status_message(flags, b.owner or 0, [0] * 10))
 
     def _lease_status(self, t: float) -> None:
-        v = self.vehicle
-        b = v.book
+        s = self.vehicle.status()
+        b = s.book
         cur = b.current
         age = b.link.age(t)
-        st = v.service
+        st = s.block
         nan = math.nan
         start = st.start if st is not None else (nan, nan)
         target = st.route.target if st is not None and st.route is not None and st.route.target else (nan, nan)
-        remaining = v.route_remaining()
+        remaining = s.route_remaining
         self.mav.send(mav.MAVLink_lease_status_message(
             self.boot_ms(t), b.epoch or 0, b.owner or 0, b.owner_compid if b.owner else 0,
             wire_index(cur.index if cur else None), cur.newest_sub[0] if cur and cur.newest_sub else NO_INDEX,
             int(cur.holder) if cur else int(Holder.NONE), int(cur.claimed) if cur else 0, len(b.scheduled),
-            v.state(), int(b.last_reason),
+            s.state, int(b.last_reason),
             0xFFFFFFFF if age is None else int(min(age, 4e6) * 1000), start[0], start[1], target[0], target[1],
-            v.displacement(), st.max_displacement if st is not None and math.isfinite(st.max_displacement) else nan,
-            remaining, min(65535, v.trail.count)))
+            s.displacement, st.max_displacement if st is not None and math.isfinite(st.max_displacement) else nan,
+            remaining, min(65535, s.trail_points)))
 
 
 BUILDERS: dict[int, Callable[[Telemetry, float], None]] = {

@@ -10,9 +10,10 @@ from __future__ import annotations
 import math
 
 from link.setpoints import IGNORE_VELOCITY, IGNORE_YAW_RATE
-from vehicle.app import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, Vehicle, velocity_to_command
 from vehicle.lease import Verdict
+from vehicle.port import VehiclePort
 from vehicle.services.base import Counters, Outbox, Service, Source, Throttle, handles, mav
+from vehicle.teleop import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, velocity_to_command
 
 BODY_FRAMES = frozenset((mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_OFFSET_NED, mav.MAV_FRAME_BODY_FRD))
 REJECT_NOTICE_GAP = 2.0  # s between STATUSTEXTs about one sender's refused teleop stream
@@ -22,7 +23,7 @@ STICK = 1000  # MANUAL_CONTROL axes run -1000..1000
 class Teleop(Service):
     """Stick and velocity streams -> teleop setpoints, for the system ``sysid``."""
 
-    def __init__(self, out: Outbox, vehicle: Vehicle, counters: Counters, sysid: int) -> None:
+    def __init__(self, out: Outbox, vehicle: VehiclePort, counters: Counters, sysid: int) -> None:
         self.out = out
         self.vehicle = vehicle
         self.counters = counters
@@ -47,7 +48,7 @@ class Teleop(Service):
         if m.coordinate_frame in BODY_FRAMES:
             speed, turn = vx, yaw_rate if yaw_rate is not None else 0.0
         else:
-            speed, turn = velocity_to_command(vx, vy, yaw_rate, self.vehicle.estimator.pose.yaw)
+            speed, turn = velocity_to_command(vx, vy, yaw_rate, self.vehicle.status().pose.yaw)
         self.drive(speed, turn, src, t)
 
     def drive(self, speed: float, yaw_rate: float, src: Source, t: float) -> None:

@@ -1,0 +1,178 @@
+"""The one door into the vehicle core (docs/architecture.md §2 "Ports, not a hub").
+
+Whoever talks to the core (the MAVLink services of ``vehicle/services/``, the companion of ``vehicle/companion/``,
+the simulator's link-loss baselines in ``sim/policies/``) holds a ``VehiclePort``, never the ``Vehicle`` class, and
+sees three things through it:
+
+- **the command authority**: every state-changing request (take or give up the root, claim or expire a lease, arm,
+  hold, teleop, a return plan, a parameter) is a method that the lease book decides and that answers with a verdict
+  (``Check``) or a reason (``str``). Nobody outside asks the book itself, nobody changes a field;
+- **a status snapshot** (``Status``): an immutable value of what the vehicle is and knows, taken once per tick and
+  retaken only when a command changed the lease book, the arming or the hold in between, so an answer sent between
+  two ticks never shows a lease that is already gone;
+- **an event queue** the core owns (``Announcements``): the lease transitions, the notices and the plan items
+  reached since the endpoint's services last drained them. Draining is the only way they leave.
+
+``vehicle.app.Vehicle`` provides it. This module imports only values (no part of the vehicle that could import it
+back), so every room can name the port without tying itself to the core's composition.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple, Protocol
+
+import numpy as np
+
+from vehicle.estimator import Pose
+from vehicle.lease import Check, ExpireReason, LeaseBook, LeaseEvent
+from vehicle.service import PlanItem, ServiceState
+
+DT = 0.02  # the control tick: 50 Hz (the tick is ``vehicle.control.ControlLoop``; every loop that drives one uses it)
+
+
+class Status(NamedTuple):
+    """What the vehicle is and knows at one moment: read-only, built by the core, never changed by a reader.
+
+    A named tuple rather than a frozen dataclass for the reason ``vehicle.estimator.Pose`` and ``vehicle.io.Readings``
+    are one: it is made every 20 ms tick, a tuple is built at a third of the cost, with the same names and the same
+    immutability. Every field is a plain value or an immutable one (the lease book is a frozen value: a transition
+    makes a new book, so holding this one changes nothing in the core)."""
+
+    t: float  # the time of the last tick
+    pose: Pose  # the estimate (never ground truth: it is all a real vehicle knows)
+    speed: float  # over the ground, this tick's odometry (0 before the first reading)
+    yaw_rate: float  # rad/s, this tick's gyro (0 before the first reading)
+    sensing: bool  # the robot has given readings (telemetry's GPS health needs one)
+    fix_std: float | None  # this tick's position fix, its 1-sigma error (None: no fix this tick)
+    fixes_used: int  # fixes the estimator took since boot
+    last_fix: tuple[float, float] | None  # the last fix the estimator took (local frame)
+    last_fix_t: float | None  # ... and when
+    armed: bool
+    holding: bool  # the operator asked for HOLD (AUTO_LOITER until it drives again)
+    held: bool  # an injected contingency keeps the robot standing by its own rules
+    state: int  # RETURNLINK_STATE (``vehicle.lease_terms.State``)
+    home: tuple[float, float]  # where the vehicle booted (local frame)
+    mav_type: int  # the robot's HEARTBEAT type
+    book: LeaseBook  # the lease state: owner, epoch, current and scheduled leases, the owner's link watch
+    link_good: bool  # this tick's link tag: the owner heard recently, with good quality
+    outbound_speed: float  # the speed driven outbound (a return at RTL_SPEED 0 drives it)
+    command_out: tuple[float, float]  # the speed and yaw rate commanded this tick
+    block: ServiceState | None  # the running return block (None: none runs)
+    displacement: float  # how far the running block has taken the robot from where it started (0: none runs)
+    route_remaining: float  # metres of the running block's route still ahead (0: none)
+    trail_points: int  # crumbs in the breadcrumb trail
+
+
+class Announcements(NamedTuple):
+    """What the core has to announce since the last drain: a LEASE_EVENT per transition, a STATUSTEXT per notice."""
+
+    events: tuple[LeaseEvent, ...] = ()
+    notices: tuple[str, ...] = ()
+
+
+NOTHING = Announcements()  # most ticks: nothing to announce
+
+
+class ParamReader(Protocol):
+    """The parameter table as a reader sees it (``vehicle.params.Params`` is one)."""
+
+    def __getitem__(self, name: str) -> float: ...
+
+    def names(self) -> list[str]: ...
+
+
+class VehiclePort(Protocol):
+    """The vehicle core as every room outside it sees it (see the module docstring)."""
+
+    # ----- the command authority: the lease book decides, the answer is a verdict --------------------------------
+    def refuses(self, sender: int) -> bool:
+        """Someone else owns the vehicle: a state change from ``sender`` is refused (and counted)."""
+
+    def admit(self, sender: int, compid: int, t: float) -> None:
+        """A plain client's state-changing command may grant it the root (LEASE_AUTOGRANT)."""
+
+    def verdict(self, sender: int) -> Check:
+        """What the lease rules say of a state change from ``sender`` under its last claimed lease now, without
+        doing anything (a companion's router forwards on EXECUTE)."""
+
+    def grants(self, sender: int, compid: int, t: float) -> bool:
+        """Whether LEASE_AUTOGRANT would make ``sender`` the owner now, without granting it."""
+
+    def acquire(self, sender: int, compid: int, t: float, allow_takeover: bool) -> Check: ...
+
+    def release(self, sender: int, t: float) -> Check: ...
+
+    def claim(self, sender: int, epoch: int, index: int, t: float) -> Check: ...
+
+    def expire(self, sender: int, epoch: int, index: int, t: float) -> Check: ...
+
+    def rtl(self, sender: int, compid: int, t: float) -> Check:
+        """RTL button or mode: OPERATOR_EXPIRE of the operator lease, so the return plan runs."""
+
+    def take_manual(self, sender: int, compid: int, t: float) -> Check:
+        """A manual mode (or HOLD) takes the operator lease back, if the sender owns the vehicle."""
+
+    def command(self, sender: int, compid: int, t: float, payload: tuple) -> Check:
+        """A standard state change under the sender's last claimed lease: ``("teleop", speed, yaw_rate)``,
+        ``("hold",)`` or ``("arm", on)``."""
+
+    def return_now(self, items: tuple[PlanItem, ...], sender: int, compid: int, t: float) -> Check: ...
+
+    def set_plan(self, items: tuple[PlanItem, ...], t: float) -> str | None:
+        """The return plan uploaded: why not, or None."""
+
+    def set_plan_start(self, seq: int, sender: int, compid: int, t: float) -> str | None: ...
+
+    def plan_leases(self) -> int:
+        """How many execution leases the stored return plan makes."""
+
+    def set_param(self, name: str, value: float) -> float:
+        """Store a parameter and apply it at once (``ParamError`` leaves the old value)."""
+
+    def preempt(self, t: float, reason: ExpireReason, why: str) -> bool:
+        """The robot left the vehicle's hands from outside the book (a companion's autopilot): the current lease
+        and its chain end. True if a lease ended."""
+
+    def refused(self) -> None:
+        """Count a state change refused outside the lease book (the signing gate, a companion's router): every
+        refusal is counted, never silent."""
+
+    def robot_armed(self, armed: bool) -> None:
+        """The robot reports its own arming (a companion's autopilot arms itself): the vehicle follows it."""
+
+    def bind_key(self) -> None:
+        """A signing key is installed: from now on the root only by an explicit signed request (§4.1)."""
+
+    # ----- what the vehicle hears ---------------------------------------------------------------------------------
+    def heard(self, sysid: int, t: float, seq: int | None = None) -> None:
+        """A trusted frame from ``sysid`` with sequence number ``seq``: the owner's feed its link watch."""
+
+    def radio_rssi(self, dbm: float, t: float | None = None) -> None:
+        """The vehicle's radio reports the owner's signal strength (never decides a loss or a regain)."""
+
+    # ----- reads --------------------------------------------------------------------------------------------------
+    def status(self) -> Status:
+        """The snapshot of now (see ``Status``)."""
+
+    @property
+    def params(self) -> ParamReader:
+        """The parameter table, to read (a change goes through ``set_param``)."""
+
+    def param_values(self) -> dict[str, float]:
+        """Every parameter's value now, a copy (what a .parm file keeps)."""
+
+    def trail_points(self) -> np.ndarray:
+        """The breadcrumb trail's points (estimate frame), oldest first: an (n, 2) copy."""
+
+    def linkmap_cells(self) -> list:
+        """The owner's link over space, cell by cell (``vehicle.linkmap``), for the file a station fetches."""
+
+    # ----- the event queue ----------------------------------------------------------------------------------------
+    def announce(self, text: str) -> None:
+        """A notice for the ground stations (STATUSTEXT), queued with the core's own."""
+
+    def drain(self) -> Announcements:
+        """The transitions and notices queued since the last drain, oldest first; the queue is empty afterwards."""
+
+    def drain_reached(self) -> tuple[int, ...]:
+        """The plan items reached since the last drain (MISSION_ITEM_REACHED), oldest first; then none."""
