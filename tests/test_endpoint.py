@@ -268,8 +268,8 @@ def test_stale_guards_catch_a_setpoint_that_slipped_past_the_lease_check(monkeyp
 
 
 def test_a_cleared_setpoint_is_judged_again_once_its_lease_is_gone():
-    """The teleop guards are skipped while the lease book and the setpoint are the very objects they last cleared
-    (both immutable); a lease that ends makes a new book, and the same setpoint must stop at the next tick."""
+    """The teleop guards judge a setpoint again every tick it drives (never a cached verdict): a lease that ends
+    makes a new book, and the same setpoint must stop at the next tick."""
     from vehicle.app import DT
 
     pair = acquired(Pair())
@@ -280,7 +280,7 @@ def test_a_cleared_setpoint_is_judged_again_once_its_lease_is_gone():
     assert sp is not None and sp.speed > 0.0 and v.control.command_out == (sp.speed, sp.yaw_rate)
     t1, t2 = round(pair.t + DT, 9), round(pair.t + 2 * DT, 9)
     assert t2 <= sp.until  # alive for both ticks below: only its lease can stop it
-    v.tick(t1)  # the same book and setpoint: cleared once, the same answer
+    v.tick(t1)  # the same book and setpoint: judged again, the same answer
     assert v.setpoint is sp and v.control.command_out == (sp.speed, sp.yaw_rate)
     assert v.claim(v.book.owner, v.book.epoch, v.book.next_index, t1).executes  # a newer lease: sp's is stale
     assert v.setpoint is sp

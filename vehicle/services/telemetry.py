@@ -54,7 +54,7 @@ class Telemetry(Service):
 
     Each builder constructs pymavlink's message object and hands it to the encoder's ``send``, which is what the
     generated ``<name>_send`` methods do after ``<name>_encode`` (the defaults are the same:
-    tests/test_telemetry_fast_paths.py). ``rates`` are the streams sent unasked and their default intervals."""
+    tests/test_telemetry_builders.py). ``rates`` are the streams sent unasked and their default intervals."""
 
     def __init__(self, out: Outbox, vehicle: VehiclePort, origin: Origin, boot_t: float,
                  link_stats: Callable[[], tuple[int, int]], mission_count: Callable[[], int], *,
@@ -76,8 +76,6 @@ class Telemetry(Service):
         self.last_status_key: tuple | None = None
         self.last_control_key: tuple | None = None
         self.last_mode: int | None = None
-        self._seen: tuple = (None, None, None, None)  # (book, block, holding, baseline holding) of the keys
-        self._keys_from: tuple = (None,) * 6  # what the keys were last computed from (see _on_change)
 
     def boot_ms(self, t: float) -> int:
         return boot_ms(t, self.boot_t)
@@ -136,13 +134,7 @@ class Telemetry(Service):
         if t >= self.next_heartbeat:
             self.next_heartbeat = t + HEARTBEAT_PERIOD
             self.heartbeat.send(t)
-        seen = self._seen
-        held = s.held
-        if s.book is not seen[0] or s.block is not seen[1] or s.holding != seen[2] or held != seen[3]:
-            # most ticks these are the very same objects and nothing can have changed (a baseline's own hold
-            # changes the state with no lease change, hence ``held``); the tuple is only built when one did
-            self._seen = (s.book, s.block, s.holding, held)
-            self._on_change(t, s)
+        self._on_change(t, s)
         if t + 1e-9 < self.next_due:
             return
         # one pass: what is due is sent, and the earliest next due time is found on the way (the builders send
@@ -162,18 +154,9 @@ class Telemetry(Service):
 
     def _on_change(self, t: float, s: Status) -> None:
         """LEASE_STATUS, MISSION_CURRENT and CONTROL_STATUS due now, and CURRENT_MODE sent, if what they show
-        changed.
-
-        The keys are functions of the book's leases (the current one is the first), epoch, owner and takeover
-        flag, of the vehicle's state and of the operator's hold: all immutable or plain values. Hearing the owner
-        gives a new book with only its link watch changed, a fifth of the ticks: then these are the very same, and
-        the keys are not computed again."""
+        changed. (Computed every tick, plainly: the two memos that skipped it while the book, the block and the hold
+        were the very same objects saved 1.1 us of a 66 us tick, under the 5 % a speed idiom must buy, issue 29.)"""
         b = s.book
-        k = self._keys_from
-        if (b.leases is k[0] and b.epoch == k[1] and b.owner == k[2] and b.takeover_allowed == k[3]
-                and s.state == k[4] and s.holding == k[5]):
-            return
-        self._keys_from = (b.leases, b.epoch, b.owner, b.takeover_allowed, s.state, s.holding)
         status_key = self._status_key(s)
         if status_key != self.last_status_key:
             self.last_status_key = status_key
