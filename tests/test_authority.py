@@ -7,6 +7,7 @@ import pytest
 
 from tests.harness import Pair
 from vehicle.app import State
+from vehicle.lease_root import owner_stale
 from vehicle.services.base import mav
 
 OWNER, STRANGER = 255, 245
@@ -37,7 +38,7 @@ def test_a_stale_owner_is_not_taken_over_while_its_return_runs():
     pair.stations.pop(OWNER)  # the owner's link dies: nothing more arrives from it
     pair.until(lambda: pair.vehicle.state() == State.RETURNING, 5, "the return")
     pair.step(4.0)
-    assert pair.vehicle.state() == State.RETURNING and pair.vehicle.book.owner_stale(pair.t)
+    assert pair.vehicle.state() == State.RETURNING and owner_stale(pair.vehicle.book, pair.t)
     gs = pair.stations[STRANGER]
     take, arm = gs.acquire(), gs.arm(False)
     pair.until(lambda: take.done and arm.done, 2, "ACKs")

@@ -91,7 +91,7 @@ class LeaseMachine(RuleBasedStateMachine):
     # ----- rules -------------------------------------------------------------------------------------------
     @rule(station=st.sampled_from(STATIONS), seed=st.integers(0, 10_000))
     def acquire(self, station: int, seed: int) -> None:
-        if self.book.may_take(station, self.t):
+        if self.book.take_refusal(station, self.t) is None:
             self.apply(self.book.acquire(station, 190, self.t, seed))
 
     @rule(station=st.sampled_from(STATIONS))

@@ -3,7 +3,9 @@
 ``LeaseBook`` is the whole lease state of one vehicle as one immutable value, in the style of the Spot SDK's
 ``lease.py`` and PX4's failsafe framework: every transition takes the time as an argument and returns a new book
 plus what happened (``Outcome``). No clock, socket or MAVLink framing lives here, so the rules can be tested on
-their own and replayed from a journal. The book is the public face; each concept it holds has a file of its own:
+their own. The book is the public face; each concept it holds has a file of its own (the rules are functions over
+the one value, not objects with state of their own: a transition such as a new root touches the root's epoch and
+every execution lease at once, and one immutable value makes that one step, never two half-applied ones):
 
     lease_terms    the vocabulary: LeaseId, Holder, ExpireReason, LeaseEvent, Check, Outcome ..., and the book's
                    state the rules read and return (BookState, LeaseConfig; LeaseBook adds the rules as methods)
@@ -11,7 +13,6 @@ their own and replayed from a journal. The book is the public face; each concept
     lease_root     the root lease: epochs, acquire, release, takeover and auto-grant rules (§3.1, §3.8)
     lease_ledger   the execution-lease sequence: claims, expiry triggers, re-arm, subleases (§3.2-§3.7)
     link_watch     the owner's link: whether COMMS_LOST or LINK_REGAINED happened (§3.5, §6)
-    lease_journal  the book as JSON and back
 
 Vocabulary (patent US 2022/0197292): ``[E]`` is the root lease with epoch E, ``[E,i]`` execution lease i, and
 ``[E,i,j,...]`` its subleases. The *current* execution lease is the lowest-index lease that has not expired.
@@ -21,9 +22,8 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
-from typing import Any
 
-from vehicle import lease_guard, lease_journal, lease_ledger, lease_root
+from vehicle import lease_guard, lease_ledger, lease_root
 from vehicle.lease_guard import RETURN_IN_PROGRESS
 from vehicle.lease_root import epoch_before
 from vehicle.lease_terms import (
@@ -58,9 +58,6 @@ class LeaseBook(BookState):
     Immutable; every method returns a new book."""
 
     # ----- queries (the rest: ``BookState``) ---------------------------------------------------------------
-    def owner_stale(self, t: float) -> bool:
-        return lease_root.owner_stale(self, t)
-
     # ----- enforcement (lease_guard) -----------------------------------------------------------------------
     def check(self, sender: int, claim: LeaseId | None = None) -> Check:
         """Verdict for a state-changing command from ``sender`` carrying ``claim`` (None: the lease the sender
@@ -76,10 +73,6 @@ class LeaseBook(BookState):
 
     def take_refusal(self, sysid: int, t: float) -> str | None:
         return lease_root.take_refusal(self, sysid, t)
-
-    def may_take(self, sysid: int, t: float) -> bool:
-        """Whether ``sysid`` may take the root now (see ``take_refusal``)."""
-        return lease_root.take_refusal(self, sysid, t) is None
 
     def admit(self, sender: int, compid: int, t: float, seed: int = 0) -> Outcome:
         return lease_root.admit(self, sender, compid, t, seed)
@@ -150,13 +143,3 @@ class LeaseBook(BookState):
 
     def with_config(self, config: LeaseConfig) -> LeaseBook:
         return replace(self, config=config, link=self.link.with_config(config.watch))
-
-    # ----- journal (lease_journal) -------------------------------------------------------------------------
-    def snapshot(self) -> dict[str, Any]:
-        """A JSON-able picture of the book (block payloads must themselves be JSON-able)."""
-        return lease_journal.snapshot(self)
-
-    @classmethod
-    def restore(cls, snap: dict[str, Any]) -> LeaseBook:
-        config = LeaseConfig(**snap["config"])
-        return cls(config=config, **lease_journal.restored_fields(snap, config.watch))

@@ -237,7 +237,7 @@ class LeaseConfig:
 @dataclass(frozen=True)
 class BookState:
     """What the lease book holds, and the queries that only read it: the value every rule (``lease_guard``,
-    ``lease_root``, ``lease_ledger``, ``lease_journal``) takes and returns. ``vehicle.lease.LeaseBook`` is this value
+    ``lease_root``, ``lease_ledger``) takes and returns. ``vehicle.lease.LeaseBook`` is this value
     with the rules as its methods; declared here, below the rules, so that no rule imports the book that calls it."""
 
     config: LeaseConfig = field(default_factory=LeaseConfig)
