@@ -207,3 +207,28 @@ def test_every_firmware_test_file_is_marked_firmware():
         if "pytest.mark.firmware" not in marks:
             unmarked.append(path.name)
     assert files and unmarked == []
+
+
+def _private_imports(module: str, source: str) -> list[str]:
+    """``from M import _name`` of another module of the project: its private name (``__future__`` and dunders
+    aside)."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if (isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] in PACKAGES
+                and node.module != module):
+            found += [f"{module}: from {node.module} import {a.name}" for a in node.names
+                      if a.name.startswith("_") and not a.name.startswith("__")]
+    return found
+
+
+def test_no_module_imports_another_modules_private_names():
+    """issue 29: a name with a leading underscore is its module's own business; another module that needs it
+    needs a public name (the SmartRTL baseline once imported the trail's ``_douglas_peucker``)."""
+    found = [f for m, path in _project_modules().items() for f in _private_imports(m, path.read_text(encoding="utf-8"))]
+    assert found == []
+
+
+def test_the_private_import_check_finds_one():
+    assert _private_imports("sim.policies.smartrtl", "from vehicle.trail import _douglas_peucker, seg_dist\n") == \
+        ["sim.policies.smartrtl: from vehicle.trail import _douglas_peucker"]
+    assert _private_imports("vehicle.trail", "from __future__ import annotations\nfrom vehicle import __doc__\n") == []
