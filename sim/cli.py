@@ -494,6 +494,57 @@ def _cmd_sim_serve_firmware(args: argparse.Namespace, sc) -> int:
     return 0
 
 
+def _cmd_sim_serve_px4(args: argparse.Namespace, sc) -> int:
+    """`sim serve --vehicle px4rover`: PX4, paced to the wall clock, behind the radio proxy, flying its own data-link
+    failsafe (--policy px4-hold or px4-return)."""
+    from sim.firmware.process import stop_on_terminate
+    from sim.firmware.report import trajectory
+    from sim.policies import PX4_FAILSAFE_POLICIES
+    from sim.px4.locate import ENV
+    from sim.px4.lockstep import PX4Unusable
+    from sim.px4.process import PX4Error
+    from sim.px4.serve import PX4Server
+
+    policy = _policy_for(args, "px4rover")
+    if policy not in PX4_FAILSAFE_POLICIES:
+        raise _fail(f"sim serve --vehicle px4rover flies PX4's own data-link failsafe: --policy "
+                    f"{' or '.join(PX4_FAILSAFE_POLICIES)} (got {policy})")
+    if args.firmware:
+        raise _fail("--firmware goes with --vehicle ardurover; PX4 is found by --px4 DIR or RETURNLINK_PX4")
+    for flag in ("params", "key", "state"):
+        if getattr(args, flag):
+            raise _fail(f"--{flag} configures returnlink's own vehicle; PX4 keeps its parameters and signing in "
+                        "itself (set them over MAVLink)")
+    px4 = _px4(args.px4)
+    out = Path(args.out) if args.out else Path("out") / f"serve-{sc.name}-px4rover"
+    _writable_dir(out)
+    peers = tuple(args.peer) if args.peer else (("127.0.0.1", 14550), ("127.0.0.1", 14540))
+    try:
+        server = PX4Server(sc, args.seed, policy, px4, args.port, peers, args.perfect_link, args.speedup,
+                           args.duration, log_path=out / "px4.log")
+    except OSError as e:
+        print(f"returnlink: error: cannot bind 127.0.0.1:{args.port}: {e}", file=sys.stderr)
+        return 2
+    host, port = server.address
+    print(f"returnlink: {sc.name} with PX4 ({px4}, policy {policy}) on udp {host}:{port}, sending to "
+          + ", ".join(f"{h}:{p}" for h, p in peers) + ("" if args.perfect_link else ", through the radio model"),
+          file=sys.stderr, flush=True)
+    try:
+        with stop_on_terminate():
+            server.run()
+    except PX4Unusable as e:
+        raise _fail(f"{px4} is not a PX4 that runs here ({e}); give a working one with --px4 DIR or {ENV}=DIR "
+                    "(a ready one: ../shared/px4/, see its README.md)") from None
+    except PX4Error as e:
+        print(f"returnlink: PX4 failed: {e}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("returnlink: stopped; PX4 was stopped", file=sys.stderr)
+    if server.rows:
+        print(f"returnlink: wrote {trajectory(server, out / 'trajectory.png')}", file=sys.stderr)
+    return 0
+
+
 def _serve_state(args: argparse.Namespace):
     """`sim serve`'s signing key (--key) and where the epochs it issues are kept (--state): (keystore or None,
     path), the state directory created; a bad key file or an uncreatable directory: the message, and None (exit 2)."""
@@ -532,10 +583,15 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
     from sim.serve import Server
 
     sc = _scenario(args.scenario, args.seed)
+    if args.px4 and args.vehicle != "px4rover":
+        raise _fail(f"--px4 goes with --vehicle px4rover (got vehicle {args.vehicle or sc.vehicle})")
     if args.vehicle == FIRMWARE_VEHICLE:
         return _cmd_sim_serve_firmware(args, sc)
+    if args.vehicle == "px4rover":
+        return _cmd_sim_serve_px4(args, sc)
     if args.policy or args.firmware:
-        raise _fail("--policy and --firmware go with --vehicle ardurover (the native vehicle flies its own plan)")
+        raise _fail("--policy and --firmware go with --vehicle ardurover or px4rover (the native vehicle flies its "
+                    "own plan)")
     params = _parm_file(args.params)
     if args.out:
         _writable_dir(Path(args.out))  # the plot is written on exit: know now that it can be
@@ -629,7 +685,7 @@ def _cmd_keys(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from sim.policies import COMPANION_POLICY, DEFAULT_POLICY, FAILSAFE_POLICIES, POLICY_NAMES
+    from sim.policies import COMPANION_POLICY, DEFAULT_POLICY, FAILSAFE_POLICIES, POLICY_NAMES, PX4_FAILSAFE_POLICIES
 
     p = argparse.ArgumentParser(
         prog="returnlink", description="Lease-based automated return to link for MAVLink robots.")
@@ -663,12 +719,15 @@ def build_parser() -> argparse.ArgumentParser:
     _add_world_parser(sim)
     serve = sim.add_parser("serve", help="run a scenario in real time over UDP for MAVSDK, MAVProxy, QGC")
     serve.add_argument("scenario", help="a built-in scenario name, gen:KIND (drawn from --seed) or a .toml file")
-    serve.add_argument("--vehicle", choices=["rover", "legged", "ardurover"],
-                       help="robot model (default: the scenario's); ardurover: the real ArduPilot firmware")
-    serve.add_argument("--policy", choices=(*FAILSAFE_POLICIES, COMPANION_POLICY),
+    serve.add_argument("--vehicle", choices=["rover", "legged", "ardurover", "px4rover"],
+                       help="robot model (default: the scenario's); ardurover: the real ArduPilot firmware; "
+                            "px4rover: the real PX4 rover")
+    serve.add_argument("--policy", choices=(*FAILSAFE_POLICIES, COMPANION_POLICY, *PX4_FAILSAFE_POLICIES),
                        help="with --vehicle ardurover: its GCS failsafe (default ardupilot-smartrtl), or companion: "
-                            "returnlink companion on its telemetry port (--params, --key, --state configure it)")
+                            "returnlink companion on its telemetry port (--params, --key, --state configure it); "
+                            "with --vehicle px4rover: px4-hold or px4-return (default), PX4's data-link failsafe")
     _add_firmware_option(serve)
+    _add_px4_option(serve)
     serve.add_argument("--seed", type=types.SEED)
     serve.add_argument("--speedup", type=types.SPEEDUP, default=1.0, help="run K times faster than real time")
     serve.add_argument("--port", type=types.LISTEN_PORT, default=14580, help="UDP port the vehicle listens on")

@@ -37,9 +37,8 @@ class FirmwareServer:
         self.seed = scenario.seed if seed is None else seed
         self.policy = policy
         self.duration = duration
-        # the firmware paces itself at ``speedup``
-        self.plant = self.plant_type(scenario, FIRMWARE_VEHICLE, self.seed, policy, firmware, log_path, speedup,
-                                     **plant_options)
+        self.speedup = speedup
+        self.plant = self._make_plant(firmware, log_path, **plant_options)
         self.world, self.robot, self.link, self.rows = self.plant.world, self.plant.robot, self.plant.link, \
             self.plant.rows
         self.metrics: dict | None = None  # nothing is judged: what the plot's title reads
@@ -49,6 +48,11 @@ class FirmwareServer:
         self.proxy = RadioProxy(self.transport, radio, (st.x, st.y), st.power_dbm, lambda: self.robot.pose[:2])
         self.out = out
         self._next_report = 0.0
+
+    def _make_plant(self, firmware: Path, log_path: Path | None, **plant_options):
+        """The plant, pacing itself at ``speedup`` (the firmware keeps its own time)."""
+        return self.plant_type(self.scenario, FIRMWARE_VEHICLE, self.seed, self.policy, firmware, log_path,
+                               self.speedup, **plant_options)
 
     @property
     def address(self) -> tuple[str, int]:
@@ -86,7 +90,8 @@ class FirmwareServer:
             self._next_report = t + 5.0
             quality = "perfect" if st is None else f"{st.rssi_dbm:6.1f} dBm, delivery {st.delivery:4.2f}"
             tap = self.link.tap
-            print(f"t={t:7.1f} s  {MODE_NAMES.get(tap.mode, '?'):<10} {'armed' if tap.armed else 'disarmed'}"
+            names = getattr(self.plant, "mode_names", MODE_NAMES)
+            print(f"t={t:7.1f} s  {names.get(tap.mode, '?'):<10} {'armed' if tap.armed else 'disarmed'}"
                   f"  pos ({x:6.1f}, {y:6.1f})  link {quality}{self._status()}", file=self.out, flush=True)
 
     def _status(self) -> str:
