@@ -34,8 +34,9 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("RTL_REARM", 1, 0, 1, "", "reschedule the return plan behind every fresh operator lease", integer=True),
     ParamSpec("RTL_ARRIVE_R", 1.0, 0.1, 10.0, "m", "arrival radius"),
     ParamSpec("RTL_CUT_CLR", 0.9, 0.0, 5.0, "m",
-              "a return cuts a corner only through space its range sensor saw free this far from its centre "
-              "(half-width plus margin; 0 = retrace the crumbs)"),
+              "a return cuts a corner only through space its range sensor saw free this far from its centre, "
+              "and keeps this far from what it saw occupied where it can (half-width plus margin; 0 = retrace "
+              "the crumbs)"),
     ParamSpec("TRL_SPACING", 0.5, 0.05, 10.0, "m", "minimum distance between recorded crumbs"),
     ParamSpec("TRL_TOL", 0.25, 0.01, 5.0, "m", "simplification tolerance (degrades upward only when memory is full)"),
     ParamSpec("TRL_LOOP_D", 1.0, 0.1, 10.0, "m", "trail segments closer than this close a loop"),

@@ -10,8 +10,20 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from sim.world import Wall, World
-from vehicle.clearance import CELL, FREE, OCCUPIED, FreeSpace, shortcut
+from vehicle.clearance import (
+    CELL,
+    FREE,
+    HOLD,
+    OCCUPIED,
+    TAPER,
+    FreeSpace,
+    _spread,
+    keep_clear,
+    shortcut,
+)
 from vehicle.io import Scan
+from vehicle.returning import Target, plan_route
+from vehicle.trail import Crumb, Trail
 
 BEARINGS = np.arange(90) * (2 * math.pi / 90)  # the simulated sensor's
 REACH = 8.0
@@ -176,3 +188,193 @@ def test_no_cut_comes_closer_to_a_wall_than_the_clearance_less_a_cells_diagonal(
         if any(np.allclose(a, p) and np.allclose(b, q) for p, q in zip(pts[:-1], pts[1:], strict=True)):
             continue
         assert _wall_distance(world, a, b) >= radius - CELL * math.sqrt(2)
+
+
+# -- keeping the route clear of what the sensor saw occupied (keep_clear) --
+
+CLR = 0.9  # RTL_CUT_CLR's default
+
+
+def _grid(seen: tuple[tuple[float, float], tuple[float, float]], occupied: list[tuple[float, float]],
+          unseen: tuple[float, float] | None = None) -> FreeSpace:
+    """A synthetic grid: every cell of the box ``seen`` ((x0, x1), (y0, y1)) seen free, but those of the band
+    ``unseen`` (y0, y1) across it, which nobody saw; the cells of the points ``occupied`` seen occupied (only)."""
+    free = FreeSpace()
+    (x0, x1), (y0, y1) = seen
+    ix, iy = np.meshgrid(np.arange(math.floor(x0 / CELL), math.ceil(x1 / CELL)),
+                         np.arange(math.floor(y0 / CELL), math.ceil(y1 / CELL)), indexing="ij")
+    occ = {(math.floor(x / CELL), math.floor(y / CELL)) for x, y in occupied}
+    keep = np.array([(a, b) not in occ for a, b in zip(ix.ravel(), iy.ravel(), strict=True)])
+    if unseen is not None:
+        y = (iy.ravel() + 0.5) * CELL
+        keep &= (y < unseen[0]) | (y >= unseen[1])
+    free._book(ix.ravel()[keep], iy.ravel()[keep], FREE)
+    if occ:
+        cells = np.array(sorted(occ))
+        free._book(cells[:, 0], cells[:, 1], OCCUPIED)
+    return free
+
+
+def _occupied(free: FreeSpace) -> np.ndarray:
+    """Centres of the cells seen occupied."""
+    ix, iy, bits = free.seen()
+    sel = (bits & OCCUPIED) != 0
+    return np.stack([(ix[sel] + 0.5) * CELL, (iy[sel] + 0.5) * CELL], axis=1)
+
+
+def _clearance(points: np.ndarray, occ: np.ndarray) -> np.ndarray:
+    """Per point, the distance to the nearest occupied cell's centre."""
+    if len(occ) == 0:
+        return np.full(len(points), math.inf)
+    return np.hypot(points[:, None, 0] - occ[None, :, 0], points[:, None, 1] - occ[None, :, 1]).min(axis=1)
+
+
+def _along(points: np.ndarray, step: float = 0.05) -> np.ndarray:
+    """The polyline sampled every ``step`` metres or closer (its segments, not only its corners)."""
+    out = [points[:1]]
+    for a, b in zip(points[:-1], points[1:], strict=True):
+        k = max(1, int(math.ceil(float(np.hypot(*(b - a))) / step)))
+        out.append(a + np.linspace(0.0, 1.0, k + 1)[1:, None] * (b - a))
+    return np.vstack(out)
+
+
+# a straight route north along y = 0, crumbs every half metre; a wall 0.4 m east of it from x = 3 to 7 (the cells
+# the sensor saw its face in), open space seen free everywhere else from y = -3 to 3
+_STRAIGHT = np.array([(0.5 * k, 0.0) for k in range(21)])
+_WALL = [(x, 0.4) for x in np.arange(3.0, 7.0, CELL)]
+
+
+def test_a_route_past_a_wall_is_pushed_clear_of_it_and_keeps_its_ends():
+    free = _grid(((-3.0, 13.0), (-3.0, 3.0)), _WALL)
+    occ = _occupied(free)
+    speeds = np.full(len(_STRAIGHT), 0.8)
+    pts, sp = keep_clear(_STRAIGHT, speeds, free, CLR)
+    assert np.array_equal(pts[0], _STRAIGHT[0]) and np.array_equal(pts[-1], _STRAIGHT[-1])
+    assert _clearance(_STRAIGHT, occ).min() < 0.5  # the crumbs pass the wall at 0.4 m
+    # every point of the route, between its corners too, keeps the clearance less a cell's diagonal
+    assert _clearance(_along(pts), occ).min() >= CLR - CELL * math.sqrt(2)
+    assert _clearance(pts, occ).min() >= CLR - 1e-9  # its corners keep the whole clearance
+    assert pts[:, 1].max() <= 1e-9  # pushed west, away from the wall, not through it
+    assert len(sp) == len(pts) and np.all(sp == 0.8)
+    # the stretches far from the wall keep their crumbs: the route only bends where it has to
+    assert np.all(np.abs(pts[pts[:, 0] <= 1.5, 1]) < 1e-9) and np.all(np.abs(pts[pts[:, 0] >= 8.5, 1]) < 1e-9)
+    # the bend leans in and out, half a metre sideways per metre along at most
+    d = np.diff(pts, axis=0)
+    assert np.all(np.abs(d[:, 1]) <= 0.5 * np.abs(d[:, 0]) + 1e-9)
+
+
+def test_no_range_sensor_no_clearance_nothing_seen_keep_the_route_as_it_was():
+    speeds = np.full(len(_STRAIGHT), 0.8)
+    free = _grid(((-3.0, 13.0), (-3.0, 3.0)), _WALL)
+    for grid, radius in ((None, CLR), (FreeSpace(), CLR), (free, 0.0)):
+        pts, sp = keep_clear(_STRAIGHT, speeds, grid, radius)
+        assert pts is _STRAIGHT and sp is speeds
+    # nothing occupied near it: the very same route
+    pts, sp = keep_clear(_STRAIGHT, speeds, _grid(((-3.0, 13.0), (-3.0, 3.0)), []), CLR)
+    assert pts is _STRAIGHT and sp is speeds
+
+
+def test_where_the_clearance_cannot_be_had_the_route_goes_as_far_from_the_walls_as_it_can_at_its_pace():
+    # a corridor 1.2 m wide from x = 3 to 7: no point in it is 0.9 m from both walls. On its centre line already,
+    # the route stays; driven along its west wall (the operator's clip), it is moved to the centre; neither is
+    # slowed (measured: slowing there cost the culverts' returns seconds and kept none off a wall)
+    walls = [(x, y) for x in np.arange(3.0, 7.0, CELL) for y in (0.6, -0.6)]
+    free = _grid(((-3.0, 13.0), (-3.0, 3.0)), walls)
+    speeds = np.full(len(_STRAIGHT), 1.2)
+    pts, sp = keep_clear(_STRAIGHT, speeds, free, CLR)
+    assert pts is _STRAIGHT and sp is speeds
+    off = _STRAIGHT + np.array([0.0, -0.35])
+    off[0], off[-1] = _STRAIGHT[0], _STRAIGHT[-1]
+    pts, sp = keep_clear(off, speeds, free, CLR)
+    mid = (pts[:, 0] > 3.5) & (pts[:, 0] < 6.5)
+    occ = _occupied(free)
+    assert np.all(np.abs(pts[mid, 1]) < 0.2)
+    assert _clearance(pts[mid], occ).min() > _clearance(off[(off[:, 0] > 3.5) & (off[:, 0] < 6.5)], occ).max()
+    assert len(sp) == len(pts) and np.all(sp == 1.2)
+
+
+def test_a_point_is_never_moved_into_or_across_unseen_space():
+    # the wall 0.4 m east, and nothing seen west of y = -0.25: the route moves as far as the seen cells go (a cell
+    # from -0.25 to 0), not to the clearance, so it also slows down
+    free = _grid(((-3.0, 13.0), (-0.25, 3.0)), _WALL)
+    speeds = np.full(len(_STRAIGHT), 0.8)
+    pts, _ = keep_clear(_STRAIGHT, speeds, free, CLR)
+    assert -0.25 <= pts[:, 1].min() < -0.1
+    # an unseen strip west of the route (y from -0.5 to -0.25) with free space beyond it: the route does not jump it
+    free = _grid(((-3.0, 13.0), (-3.0, 3.0)), _WALL, unseen=(-0.5, -0.25))
+    pts, _ = keep_clear(_STRAIGHT, speeds, free, CLR)
+    assert pts[:, 1].min() >= -0.25
+    assert keep_clear(_STRAIGHT, speeds, _grid(((-3.0, 13.0), (-3.0, 3.0)), _WALL), CLR)[0][:, 1].min() < -0.4
+
+
+@given(x0=st.floats(1.5, 8.0), y0=st.floats(-1.5, 1.5), length=st.floats(0.25, 5.0), angle=st.floats(0, math.pi),
+       bend=st.floats(-1.0, 1.0), hole=st.floats(-2.0, 2.0), radius=st.floats(0.4, 1.5))
+def test_no_point_is_moved_closer_to_an_occupied_cell_or_onto_one_not_seen_free(x0, y0, length, angle, bend, hole,
+                                                                                  radius):
+    """Whatever was seen occupied near a route (a wall at any angle, even across it) and wherever the unseen is,
+    each point ends no closer to an occupied cell than it was (beyond the clearance, distance is not wanted), on a
+    cell seen free, moved no further than the clearance; the ends stay."""
+    wall = [(x0 + t * math.cos(angle), y0 + t * math.sin(angle)) for t in np.arange(0.0, length, 0.5 * CELL)]
+    free = _grid(((-3.0, 13.0), (-3.0, 3.0)), wall, unseen=(hole, hole + CELL))  # a band nobody saw
+    occ = _occupied(free)
+    # a bent route with segments under a cell long, so each of its points is one sample of the shift
+    route = np.array([(0.2 * k, bend * math.sin(0.2 * k / 3.0)) for k in range(51)])
+    pts, sp = keep_clear(route, np.full(len(route), 1.0), free, radius)
+    assert len(pts) == len(route)
+    assert np.array_equal(pts[0], route[0]) and np.array_equal(pts[-1], route[-1])
+    before, after = _clearance(route, occ), _clearance(pts, occ)
+    assert np.all(np.minimum(after, radius) >= np.minimum(before, radius) - 1e-9)
+    moved = np.hypot(*(pts - route).T) > 1e-12
+    assert np.all(np.hypot(*(pts - route).T) <= radius + 1e-9)
+    cells = np.floor(pts[moved] / CELL).astype(np.int64)
+    ix, iy, bits = free.seen()
+    state = {(a, b): v for a, b, v in zip(ix.tolist(), iy.tolist(), bits.tolist(), strict=True)}
+    assert all(state.get((a, b), 0) == FREE for a, b in cells.tolist())
+
+
+def _trail_north(length: float) -> Trail:
+    trail = Trail()
+    for k in range(int(length / 0.02) + 1):
+        x = 0.02 * k
+        trail.add(Crumb(x, 0.0, 0.02 * k, 0.1, True, speed=1.0))
+    return trail
+
+
+def test_a_planned_return_keeps_clear_of_a_wall_its_crumbs_ran_close_to():
+    """The whole planning step (vehicle/returning.py): the retraced route is pushed off the wall the sensor saw,
+    its ends stay, and a robot without the sensor keeps the crumbs."""
+    trail = _trail_north(10.0)
+    free = _grid(((-3.0, 13.0), (-3.0, 3.0)), _WALL)
+    occ = _occupied(free)
+    route = plan_route(trail, (10.0, 0.0), Target.ORIGIN, 100.0, link_lost=False, free=free, clearance=CLR)
+    assert np.allclose(route.points[0], (10.0, 0.0)) and np.allclose(route.points[-1], (0.0, 0.0))
+    assert _clearance(_along(route.points), occ).min() >= CLR - CELL * math.sqrt(2)
+    assert len(route.speeds) == len(route.points)
+    blind = plan_route(trail, (10.0, 0.0), Target.ORIGIN, 100.0, link_lost=False, clearance=CLR)
+    assert _clearance(_along(blind.points), occ).min() < 0.5
+
+
+def test_the_way_on_past_a_dead_zone_target_keeps_clear_too():
+    """After a loss the route carries ``onward``, the way beyond its target that the service drives when the target
+    turns out to be a dead zone: it is kept clear of the wall like the route itself."""
+    trail = Trail()
+    for k in range(1001):  # north from 0 to 20 m; the link good up to 14 m
+        x = 0.02 * k
+        trail.add(Crumb(x, 0.0, 0.02 * k, 0.1, x <= 14.0, speed=1.0))
+    free = _grid(((-3.0, 23.0), (-3.0, 3.0)), _WALL)
+    occ = _occupied(free)
+    route = plan_route(trail, (20.0, 0.0), Target.LINK, 100.0, link_lost=True, overshoot=1.0, free=free,
+                       clearance=CLR)
+    assert route.onward is not None and route.onward.points[:, 0].min() < 3.0  # it passes the wall
+    assert _clearance(_along(route.onward.points), occ).min() >= CLR - CELL * math.sqrt(2)
+    assert np.allclose(route.onward.points[-1], (0.0, 0.0))
+
+
+@given(st.lists(st.tuples(st.floats(0.01, 1.0), st.floats(0.0, 1.0)), min_size=1, max_size=40))
+def test_the_lean_is_what_it_says(steps):
+    """keep_clear's window pass against its definition, computed the slow way."""
+    s = np.cumsum([a for a, _ in steps])
+    move = np.array([b for _, b in steps])
+    gap = np.abs(s[:, None] - s[None, :])
+    want = (move[None, :] - TAPER * np.maximum(0.0, gap - HOLD)).max(axis=1)
+    assert np.allclose(_spread(move, s), want)

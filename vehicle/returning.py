@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vehicle.clearance import FreeSpace, shortcut
+from vehicle.clearance import FreeSpace, keep_clear, shortcut
 from vehicle.linkmap import LinkMap
 from vehicle.trail import Trail
 
@@ -305,13 +305,16 @@ def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_dis
     onward = None
     if lost_link and onward_to > at + extra:
         o_pts = _cut(_cut(way.points, onward_to)[0], at)[1]
-        onward = Route(o_pts, (float(o_pts[-1, 0]), float(o_pts[-1, 1])), 0, False,
-                       np.concatenate([[way.speeds[k]], way.speeds[k + 1:]])[: len(o_pts)])
+        o_speeds = np.concatenate([[way.speeds[k]], way.speeds[k + 1:]])[: len(o_pts)]
+        o_pts, o_speeds = keep_clear(o_pts, o_speeds, free, clearance)
+        onward = Route(o_pts, (float(o_pts[-1, 0]), float(o_pts[-1, 1])), 0, False, o_speeds)
     keep = np.ones(len(full), dtype=bool)
     keep[1:] = np.hypot(*np.diff(full, axis=0).T) > 1e-9
     full, speeds = full[keep], speeds[: len(keep)][keep]
-    # the corners the range sensor saw clear are cut (vehicle/clearance.py); the way itself stays the crumbs
+    # the corners the range sensor saw clear are cut, and the route is pushed clear of what it saw occupied,
+    # as far as the seen free space allows (vehicle/clearance.py); the way itself stays the crumbs
     full, speeds = shortcut(full, speeds, free, clearance)
+    full, speeds = keep_clear(full, speeds, free, clearance)
     pts, cut = truncate(full, start, max_displacement)
     return Route(pts, (gx, gy), goal if goal >= 0 else -1, cut, speeds[: len(pts)], onward, way, by_map)
 
