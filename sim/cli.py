@@ -103,8 +103,11 @@ def _policy_for(args: argparse.Namespace, kind: str) -> str:
             raise _fail(f"vehicle {kind} flies the ArduPilot firmware's own failsafes or returnlink beside it: "
                         f"--policy ardupilot-hold, ardupilot-rtl, ardupilot-smartrtl or companion (got {policy})")
         if kind == PX4_VEHICLE:
-            raise _fail(f"vehicle {kind} flies PX4's own data-link failsafe: --policy "
-                        f"{' or '.join(PX4_FAILSAFE_POLICIES)} (got {policy})")
+            raise _fail(f"vehicle {kind} flies PX4's own data-link failsafe or returnlink beside it: --policy "
+                        f"{' or '.join(PX4_FAILSAFE_POLICIES)} or companion (got {policy})")
+        if policy == "companion":
+            raise _fail(f"policy {policy} runs beside a real autopilot: use --vehicle {FIRMWARE_VEHICLE} or "
+                        f"{PX4_VEHICLE}")
         need = "the ArduPilot firmware" if vehicle_for(policy) == FIRMWARE_VEHICLE else "PX4"
         raise _fail(f"policy {policy} needs {need}: use --vehicle {vehicle_for(policy)}")
     return policy
@@ -710,7 +713,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "default), a baseline (docs/architecture.md §9), or with --vehicle ardurover the "
                           "firmware's own failsafe (default ardupilot-smartrtl) or companion: returnlink companion "
                           "between the radio and the firmware (§11); with --vehicle px4rover PX4's own data-link "
-                          "failsafe: px4-hold or px4-return (the default; §10.1)")
+                          "failsafe: px4-hold or px4-return (the default; §10.1), or companion beside PX4 (§11.2)")
     _add_firmware_option(run)
     _add_px4_option(run)
     _add_run_campaign_options(run)

@@ -92,6 +92,10 @@ def plant_for(vehicle: str, policy: str) -> type:
     """The plant that flies ``policy`` on ``vehicle``: the ArduPilot firmware's own failsafes, returnlink companion
     beside it, PX4's own failsafe, or returnlink's own vehicle (each refuses a policy it cannot fly, saying why)."""
     if vehicle == PX4_VEHICLE:
+        if policy == COMPANION_POLICY:
+            from sim.plants.px4_companion import PX4CompanionPlant
+
+            return PX4CompanionPlant
         from sim.plants.px4 import PX4Plant
 
         return PX4Plant

@@ -113,8 +113,9 @@ def test_only_px4rover_flies_the_px4_policies_and_it_flies_nothing_else():
         assert flies(p, "px4rover") and not any(flies(p, v) for v in ("rover", "legged", "ardurover"))
         with pytest.raises(ValueError, match=f"{p}.*PX4.*vehicle 'px4rover'"):
             check_policy(p)
-    for p in ("returnlink", "hold", "smartrtl", "ardupilot-hold", "ardupilot-smartrtl", "companion"):
+    for p in ("returnlink", "hold", "smartrtl", "ardupilot-hold", "ardupilot-smartrtl"):
         assert not flies(p, "px4rover")
+    assert flies("companion", "px4rover") and flies("companion", "ardurover")  # beside either autopilot (§11.2)
     assert flies("ardupilot-rtl", "ardurover") and flies("returnlink", "rover")  # the others as before
     assert plant_for("px4rover", "px4-hold") is PX4Plant
     with pytest.raises(ValueError, match="policy 'ardupilot-hold'"):
@@ -137,14 +138,14 @@ def test_a_spec_pairing_a_policy_with_a_vehicle_that_cannot_fly_it_names_file_li
     assert str(e.value).startswith(f"pairs.toml:{line}: {field}: ") and says in str(e.value)
 
 
-def test_the_px4_spec_pairs_returnlink_with_the_rover_and_the_px4_failsafes_with_px4():
+def test_the_px4_spec_pairs_returnlink_with_the_rover_and_the_px4_failsafes_and_the_companion_with_px4():
     from sim.campaign.spec import load_spec
 
     spec = load_spec(ROOT / "sim" / "campaign" / "specs" / "px4.toml")
     pairs = {(t.scenario, t.vehicle, t.policy) for t in spec.trials}
-    assert len(spec.trials) == 3 * 10 * 3
+    assert len(spec.trials) == 3 * 10 * 4
     assert {v for _, v, _ in pairs} == {"rover", "px4rover"}
-    assert all((v == "px4rover") == p.startswith("px4-") for _, v, p in pairs)
+    assert all((v == "px4rover") == (p.startswith("px4-") or p == "companion") for _, v, p in pairs)
 
 
 def _exit_2(capsys, argv: list[str]) -> str:

@@ -244,6 +244,8 @@ def parse_spec(text: str, file: str = "<spec>", spec_dir: Path | None = None) ->
     for k, p in enumerate(policies):
         if not any(flies(p, veh) for veh in listed):
             need = f"vehicle {vehicle_for(p)!r}" if vehicle_for(p) else "a native vehicle (rover, legged)"
+            if p == "companion":
+                need = "vehicle 'ardurover' or 'px4rover'"
             raise r.fail(f"policies[{k}]", f"policy {p!r} needs {need} in vehicles")
     for k, veh in enumerate(vehicles or []):
         if not any(flies(p, veh) for p in policies):

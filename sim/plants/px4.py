@@ -118,7 +118,7 @@ class PX4Plant:
         self.lnk_timeout = float(sc.params.get("LNK_TIMEOUT", 3.0))
         speeds = [p[2] for p in (*sc.route, *sc.resume_route)]
         speed_limit = min(self.robot.max_speed, max(speeds, default=self.robot.max_speed))
-        self.params = px4_params(policy, self.lnk_timeout, speed_limit)
+        self.params = self._px4_params(policy, self.lnk_timeout, speed_limit)
         # the figures measure the reaction from the timeout PX4 was given (a whole number of seconds)
         self.lnk_timeout = float(self.params["COM_DL_LOSS_T"])
         options = {} if accept_timeout_s is None else {"accept_timeout_s": accept_timeout_s}
@@ -127,6 +127,11 @@ class PX4Plant:
         self.heard: list[float] = []
         self.operator: PX4Operator | None = None  # made with the operator's station
         self._op_name = sc.operator_station
+
+    @staticmethod
+    def _px4_params(policy: str, lnk_timeout: float, speed_limit: float) -> dict[str, float]:
+        """PX4's parameters for ``policy`` (``px4_params``; the companion's plant sets its own)."""
+        return px4_params(policy, lnk_timeout, speed_limit)
 
     # ----- the scenario around it ----------------------------------------------------------------------------
     def station(self, spec: Station, operator: bool) -> tuple[PX4Operator | None, None]:

@@ -20,7 +20,7 @@ FAILSAFE_POLICIES: tuple[str, ...] = ("ardupilot-hold", "ardupilot-rtl", "ardupi
 COMPANION_POLICY = "companion"
 FIRMWARE_POLICIES: tuple[str, ...] = (*FAILSAFE_POLICIES, COMPANION_POLICY)
 # PX4's own data-link failsafe (NAV_DLL_ACT 1 Hold, 2 Return; docs/architecture.md §10.1), flown only by ``px4rover``
-# (returnlink companion beside PX4, §11.2, is a later step: ``companion`` stays the ArduPilot firmware's for now)
+# (``companion`` flies beside PX4 too, §11.2: it is the one policy both autopilot vehicles fly)
 PX4_FAILSAFE_POLICIES: tuple[str, ...] = ("px4-hold", "px4-return")
 POLICY_NAMES: tuple[str, ...] = NATIVE_POLICIES + FIRMWARE_POLICIES + PX4_FAILSAFE_POLICIES
 DEFAULT_POLICY = "returnlink"
@@ -41,9 +41,11 @@ def vehicle_for(policy: str) -> str | None:
 
 
 def flies(policy: str, vehicle: str) -> bool:
-    """Whether ``vehicle`` can fly ``policy``: the ArduPilot firmware's failsafes and the companion need that
-    firmware, PX4's failsafes need PX4, and neither autopilot has returnlink onboard to fly the native policies
-    with."""
+    """Whether ``vehicle`` can fly ``policy``: the ArduPilot firmware's failsafes need that firmware, PX4's failsafes
+    need PX4, the companion flies beside either, and neither autopilot has returnlink onboard to fly the native
+    policies with."""
+    if policy == COMPANION_POLICY:
+        return vehicle in AUTOPILOT_VEHICLES
     needs = vehicle_for(policy)
     return vehicle == needs if needs is not None else vehicle not in AUTOPILOT_VEHICLES
 
@@ -51,9 +53,11 @@ def flies(policy: str, vehicle: str) -> bool:
 def check_policy(name: str) -> str:
     """The name of a policy the native vehicle flies, or ValueError saying why not."""
     if name in FIRMWARE_POLICIES:
-        what = "returnlink companion beside the ArduPilot firmware" if name == COMPANION_POLICY else \
-            "the ArduPilot firmware's own failsafe"
-        raise ValueError(f"policy {name!r} is {what}: fly it with vehicle {FIRMWARE_VEHICLE!r}")
+        if name == COMPANION_POLICY:
+            raise ValueError(f"policy {name!r} is returnlink companion beside a real autopilot: fly it with vehicle "
+                             f"{FIRMWARE_VEHICLE!r} or {PX4_VEHICLE!r}")
+        raise ValueError(f"policy {name!r} is the ArduPilot firmware's own failsafe: fly it with vehicle "
+                         f"{FIRMWARE_VEHICLE!r}")
     if name in PX4_FAILSAFE_POLICIES:
         raise ValueError(f"policy {name!r} is PX4's own data-link failsafe: fly it with vehicle {PX4_VEHICLE!r}")
     if name not in NATIVE_POLICIES:

@@ -98,7 +98,8 @@ def hold_after(hold_s: float, rhythm: float) -> float:
 
 
 class Companion:
-    """returnlink beside an ArduPilot Rover. Build it, feed it bytes, tick it at 50 Hz (see the module docstring)."""
+    """returnlink beside an ArduPilot Rover or a PX4 rover (which one, its first HEARTBEAT says: ``AutopilotDriver``).
+    Build it, feed it bytes, tick it at 50 Hz (see the module docstring)."""
 
     def __init__(self, params: Params, to_autopilot: Callable[[bytes], None], to_ground: Callable[[bytes], None],
                  *, key: Key | None = None, keystore: KeyStore | None = None,
@@ -142,6 +143,11 @@ class Companion:
         self.heard_at: float | None = None  # the owner's last packet, as the rhythm last saw it
         self.heard_seq: int | None = None  # its unwrapped sequence number (None: not measured)
         self.stopped_at: float | None = None  # the dead-man's last stop (None: not holding)
+        # PX4: the owner's Offboard drive went to Hold (the dead-man, or PX4's own Offboard loss) and its next
+        # setpoint asks for Offboard again (``_resume_drive``); the mode last seen, and a ground mode change's time
+        self.held_drive = False
+        self.last_mode: int | None = None
+        self.ground_mode_at: float | None = None
 
     # ----- input -----------------------------------------------------------------------------------------------
     def from_autopilot(self, data: bytes, t: float) -> None:
@@ -242,9 +248,11 @@ class Companion:
             self.to_autopilot(raw)
             self.counters["forwarded"] += 1
             if r.authority is Authority.MODE:
-                self.mode_from_ground = True
+                self.mode_from_ground, self.held_drive, self.ground_mode_at = True, False, t
             elif m.get_type() in SETPOINTS:
                 self.setpoint_at, self.stopped_at = t, None
+                if self.held_drive:
+                    self._resume_drive(t)
             return
         self._refuse(m, d, sender, scomp, t)
 
@@ -356,12 +364,40 @@ class Companion:
         rhythm = self._rhythm(book.link.last_heard, book.link.delivery.newest, v.params["LNK_TIMEOUT"])
         if not returning:
             self._dead_man(t, rhythm, book)
+        self._watch_held(t, book, returning)
         return True
+
+    def _watch_held(self, t: float, book: LeaseBook, returning: bool) -> None:
+        """PX4: note when the owner's Offboard drive went to Hold without anyone on the ground asking (PX4's
+        Offboard loss: the owner's stream silent for COM_OF_LOSS_T), so that its next setpoint resumes it
+        (``_resume_drive``); forget it once the rover is in any other mode or a return holds the lease."""
+        d = self.driver
+        mode, rules = d.seen.mode, d.rules
+        cur = book.current
+        if (rules.stop_holds and not returning and self.last_mode == rules.drive and mode == rules.hold
+                and cur is not None and cur.holder is Holder.OPERATOR and cur.claimed and self.setpoint_at is not None
+                and t - self.setpoint_at <= STREAM_S
+                and (self.ground_mode_at is None or t - self.ground_mode_at > STREAM_S)):
+            self.held_drive = True
+        if returning or mode not in (rules.drive, rules.hold):
+            self.held_drive = False
+        self.last_mode = mode
+
+    def _resume_drive(self, t: float) -> None:
+        """The owner's setpoint arrived (forwarded: it holds the current lease) while its Offboard drive stands
+        in a Hold it did not ask for: Offboard again, as ArduPilot drives again on the owner's next target after
+        the dead-man's stop. The companion knows whose lease is current; the owner's station, a radio hop away,
+        may not (a mode change from it over a return that began meanwhile would take the lease from the return)."""
+        d = self.driver
+        if d.seen.mode == d.rules.hold and not d.engaged:
+            self.held_drive = False
+            d.resume(t)
 
     def _dead_man(self, t: float, rhythm: float, book: LeaseBook) -> None:
         """Stop the autopilot's drive once the owner driving it with setpoints has fallen silent (``drive_held``):
         a zero-velocity target, repeated every STOP_RESEND s while the silence lasts. The owner's next setpoint
-        drives again; a return that follows finds the autopilot in GUIDED and standing."""
+        drives again; a return that follows finds the autopilot in GUIDED and standing (PX4: in Hold, which the
+        return leaves for Offboard once its own stream runs; ``AutopilotDriver.stop``)."""
         v, d = self.vehicle, self.driver
         assert v is not None
         heard = book.link.last_heard
@@ -371,7 +407,8 @@ class Companion:
             return
         if self.stopped_at is not None and t - self.stopped_at < STOP_RESEND:
             return
-        if d.stop():
+        if d.stop(t):
+            self.held_drive = self.held_drive or d.rules.stop_holds  # (PX4: the owner's next setpoint resumes)
             if self.stopped_at is None:
                 self.counters["drive_held"] += 1
                 self.notice(0, "dead-man", f"owner silent {t - (heard or t):.1f} s: the autopilot's drive "

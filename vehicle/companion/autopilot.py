@@ -1,5 +1,10 @@
-"""An ArduPilot Rover as the robot: a ``RobotDriver`` over MAVLink instead of wheels and sensors
-(docs/architecture.md §11).
+"""An ArduPilot Rover or a PX4 rover as the robot: a ``RobotDriver`` over MAVLink instead of wheels and sensors
+(docs/architecture.md §11, §11.2).
+
+The driver learns which autopilot it drives from the first HEARTBEAT (``autopilot`` 3 ArduPilot, 12 PX4) and
+takes that autopilot's rules (``ArduPilotRules``, ``PX4Rules``: mode numbers, how a mode is asked for, the targets,
+the streams, parameter encoding); everything else (readings, engagement, the watch for modes it did not command,
+the keepalive) is one code for both. What follows is ArduPilot's story; PX4's is in ``vehicle.companion.px4``.
 
 Readings come from the autopilot's own filtered estimate: LOCAL_POSITION_NED (asked for at 10 Hz with
 MAV_CMD_SET_MESSAGE_INTERVAL) as the position fix, ATTITUDE as heading and yaw rate, GPS_RAW_INT and
@@ -26,6 +31,7 @@ from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
+from vehicle.companion import px4
 from vehicle.io import Fix, Readings
 
 # ArduPilot Rover's mode numbers (Rover/mode.h)
@@ -55,10 +61,12 @@ EKF_POS_HORIZ_REL, EKF_POS_HORIZ_ABS = 8, 16
 
 def rover_problem(m) -> str | None:
     """Why the autopilot whose HEARTBEAT is ``m`` cannot be driven by the companion, or None if it can."""
+    if m.autopilot == apm.MAV_AUTOPILOT_PX4:
+        return px4.rover_problem(m)
     if m.autopilot != apm.MAV_AUTOPILOT_ARDUPILOTMEGA:
         entry = apm.enums["MAV_AUTOPILOT"].get(m.autopilot)
         name = entry.name.removeprefix("MAV_AUTOPILOT_") if entry else str(m.autopilot)
-        return f"the autopilot is {name}, not ArduPilot"
+        return f"the autopilot is {name}, not ArduPilot or PX4"
     if m.type not in ROVER_TYPES:
         entry = apm.enums["MAV_TYPE"].get(m.type)
         name = entry.name.removeprefix("MAV_TYPE_") if entry else str(m.type)
@@ -68,6 +76,64 @@ def rover_problem(m) -> str | None:
 
 def is_autopilot_heartbeat(m) -> bool:
     return m.get_type() == "HEARTBEAT" and m.autopilot != apm.MAV_AUTOPILOT_INVALID
+
+
+class ArduPilotRules:
+    """How the companion drives ArduPilot Rover (the module docstring): GUIDED, then velocity and turn-rate targets
+    in the body frame, which the firmware executes for 3 s each; HOLD to stop; parameters cast to float."""
+
+    name = "ArduPilot Rover"
+    autopilot = apm.MAV_AUTOPILOT_ARDUPILOTMEGA
+    drive, hold = GUIDED, HOLD
+    lead: float | None = None  # targets only once in GUIDED: the firmware needs no stream before the switch
+    mode_retry, mode_tries = MODE_RETRY, MODE_TRIES
+    streams = STREAMS
+    gcs_sysid_params = GCS_SYSID_PARAMS
+    stop_holds = False  # the dead-man's stop: a zero target, staying in GUIDED
+
+    @staticmethod
+    def mode_name(mode: int | None) -> str:
+        return "unknown" if mode is None else ROVER_MODES.get(mode, f"mode {mode}")
+
+    @staticmethod
+    def set_mode(enc: apm.MAVLink, sysid: int, compid: int, mode: int):
+        return enc.command_long_encode(sysid, compid, apm.MAV_CMD_DO_SET_MODE, 0,
+                                       apm.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode, 0, 0, 0, 0, 0)
+
+    @staticmethod
+    def param_value(value: float, ptype: int) -> float:
+        return float(value)
+
+    @staticmethod
+    def param_wire(value: float, ptype: int) -> float:
+        return float(value)
+
+
+class PX4Rules:
+    """How the companion drives a PX4 rover (``vehicle.companion.px4``): a velocity stream from the moment a return
+    holds the lease, Offboard asked for once it runs, Hold (AUTO_LOITER) to stop; parameters bytewise."""
+
+    name = "PX4 rover"
+    autopilot = apm.MAV_AUTOPILOT_PX4
+    drive, hold = px4.OFFBOARD, px4.HOLD
+    lead: float | None = px4.STREAM_LEAD
+    mode_retry, mode_tries = px4.MODE_RETRY, px4.MODE_TRIES
+    streams = px4.STREAMS
+    gcs_sysid_params: tuple[str, ...] = ()  # PX4 counts any GCS-type HEARTBEAT: no system id to match
+    stop_holds = True  # the dead-man's stop: Hold (a stream of stops would also keep a dead owner's Offboard alive)
+    mode_name = staticmethod(px4.mode_name)
+    set_mode = staticmethod(px4.set_mode)
+    param_value = staticmethod(px4.param_value)
+    param_wire = staticmethod(px4.param_wire)
+
+
+RULES: dict[int, type[ArduPilotRules] | type[PX4Rules]] = {apm.MAV_AUTOPILOT_PX4: PX4Rules}
+
+
+def rules_for(autopilot: int) -> type[ArduPilotRules] | type[PX4Rules]:
+    """The rules for the autopilot a HEARTBEAT names (ArduPilot's for anything not PX4: ``rover_problem`` says
+    whether it can be driven at all)."""
+    return RULES.get(autopilot, ArduPilotRules)
 
 
 @dataclass
@@ -128,6 +194,7 @@ class AutopilotDriver:
         """``pivots``: the rover turns on the spot (skid steering); otherwise a turn in place creeps."""
         self.send = send
         self.pivots = pivots
+        self.rules: type[ArduPilotRules] | type[PX4Rules] = ArduPilotRules  # until the autopilot's HEARTBEAT says
         self.seen = Observed()
         self.enc: apm.MAVLink | None = None  # as (the autopilot's sysid, 191), once that sysid is known
         self.keepalive_enc = apm.MAVLink(None, 255, COMPANION_COMPID)
@@ -141,6 +208,12 @@ class AutopilotDriver:
         self.tries = 0
         self.refused: str | None = None  # the autopilot's answer to a mode request it refused
         self.next_target = -math.inf
+        self.switch_at: float | None = None  # when to ask for the drive mode, once the stream runs (PX4)
+        self.mode_at = -math.inf  # when the autopilot last said its mode (a HEARTBEAT, or accepting a request)
+        self.yaw_p = px4.YAW_P  # PX4's RO_YAW_P, once read: how its yaw loop answers a bearing
+        self.about: float | None = None  # PX4: the NED bearing of an about-turn in place of a backward drive
+        self.about_at = 0  # ... begun at this target
+        self.targets = 0  # PX4 targets sent
         self.next_keepalive = -math.inf
         self.next_stream_check = -math.inf
         self.streams_asked = False
@@ -159,9 +232,11 @@ class AutopilotDriver:
             if s.sysid is None:
                 s.sysid, s.compid = m.get_srcSystem(), m.get_srcComponent()
                 self.enc = apm.MAVLink(None, s.sysid, COMPANION_COMPID)
+                self.rules = rules_for(m.autopilot)
             if (m.get_srcSystem(), m.get_srcComponent()) == (s.sysid, s.compid):
                 s.mav_type, s.autopilot = m.type, m.autopilot
                 s.mode, s.armed = m.custom_mode, bool(m.base_mode & apm.MAV_MODE_FLAG_SAFETY_ARMED)
+                self.mode_at = t
         if s.sysid is None or m.get_srcSystem() != s.sysid or m.get_srcComponent() != s.compid:
             return
         s.heard = t
@@ -175,19 +250,23 @@ class AutopilotDriver:
             s.eph = m.eph / 100 if m.eph != 65535 else None
             h_acc = getattr(m, "h_acc", 0)
             s.h_acc = h_acc / 1000 if h_acc else None
-        elif kind == "EKF_STATUS_REPORT":
-            s.ekf_flags = m.flags
+        elif kind == "EKF_STATUS_REPORT" or (kind == "ESTIMATOR_STATUS" and self.rules is PX4Rules):
+            s.ekf_flags = m.flags  # (the same bits: position horizontal relative 8, absolute 16)
         elif kind == "GPS_GLOBAL_ORIGIN":
             s.origin = (m.latitude / 1e7, m.longitude / 1e7, m.altitude / 1000)
         elif kind == "PARAM_VALUE":
             name = _param_name(m.param_id)
-            s.params[name], s.param_types[name] = float(m.param_value), m.param_type
+            s.params[name], s.param_types[name] = self.rules.param_value(m.param_value, m.param_type), m.param_type
+            if name == "RO_YAW_P" and s.params[name] > 0:
+                self.yaw_p = s.params[name]
         elif kind == "COMMAND_ACK" and m.command == apm.MAV_CMD_DO_SET_MODE and self._for_me(m):
             if m.result == apm.MAV_RESULT_ACCEPTED and self.wanted is not None:
-                s.mode = self.wanted  # set before the answer left: the next heartbeat will show it
-            elif m.result not in (apm.MAV_RESULT_ACCEPTED, apm.MAV_RESULT_IN_PROGRESS) and self.wanted is not None:
+                s.mode, self.mode_at = self.wanted, t  # set before the answer left: the next heartbeat shows it
+            elif m.result not in (apm.MAV_RESULT_ACCEPTED, apm.MAV_RESULT_IN_PROGRESS) and self.wanted is not None \
+                    and not (self.rules.lead is not None and self.tries < self.rules.mode_tries):
+                # (PX4 refuses Offboard until its check has seen the stream: asked again, up to its tries)
                 entry = apm.enums["MAV_RESULT"].get(m.result)
-                self.refused = (f"the autopilot refused {mode_name(self.wanted)} "
+                self.refused = (f"the autopilot refused {self.mode_name(self.wanted)} "
                                 f"({entry.name.removeprefix('MAV_RESULT_') if entry else m.result})")
 
     def _for_me(self, m) -> bool:
@@ -239,20 +318,29 @@ class AutopilotDriver:
     # ----- the return's hands on the autopilot -----------------------------------------------------------------
     def engage(self, t: float) -> None:
         """A return holds the lease (and the autopilot is armed: a disarmed rover's mode is its pilot's): GUIDED,
-        then targets."""
+        then targets (PX4: targets, then Offboard once they run)."""
+        r = self.rules
         self.engaged, self.refused = True, None
         self.mode_at_engage = self.seen.mode
-        self.confirmed = self.seen.mode == GUIDED
-        if not self.confirmed:
-            self._ask(GUIDED, t)
+        self.switch_at = self.about = None
+        if r.lead is None:
+            self.confirmed = self.seen.mode == r.drive
+            if not self.confirmed:
+                self._ask(r.drive, t)
+        else:
+            # PX4: the stream first, then Offboard asked for even if the owner's Offboard still shows: its stream
+            # died with the link, and PX4 may be leaving Offboard for Hold right now (COM_OF_LOSS_T), which its
+            # heartbeat says up to a second later. Confirmed once PX4 has answered the companion's own request
+            self.confirmed = False
+            self.switch_at, self.next_target = t + r.lead, t
 
     def release(self, t: float, hold: bool) -> None:
         """The return no longer holds the lease: no more targets; HOLD if ``hold`` and the autopilot is still in
         the mode the companion put it in (a mode someone else chose is theirs)."""
         self.engaged = False
-        self.wanted = None
-        if hold and self.seen.mode == GUIDED:
-            self._ask(HOLD, t)
+        self.wanted = self.switch_at = None
+        if hold and self.seen.mode == self.rules.drive:
+            self._ask(self.rules.hold, t)
 
     def _ask(self, mode: int, t: float) -> None:
         self.wanted, self.tries, self.refused = mode, 0, None
@@ -262,8 +350,7 @@ class AutopilotDriver:
         if self.enc is None or self.wanted is None:
             return
         self.asked_at, self.tries = t, self.tries + 1
-        self.send_message(self.enc.command_long_encode(self.seen.sysid, self.seen.compid, apm.MAV_CMD_DO_SET_MODE, 0,
-                                                apm.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, self.wanted, 0, 0, 0, 0, 0))
+        self.send_message(self.rules.set_mode(self.enc, self.seen.sysid, self.seen.compid, self.wanted))
 
     def tick(self, t: float, healthy: bool) -> str | None:
         """Send what is due (keepalive, stream requests, mode requests, targets) and say why the return lost the
@@ -275,34 +362,55 @@ class AutopilotDriver:
             self._keepalive()
         if t >= self.next_stream_check:
             self._check_streams(t)
-        s = self.seen
+        s, r = self.seen, self.rules
         if self.wanted is not None:
-            if s.mode == self.wanted:
+            if s.mode == self.wanted and (r.lead is None or self.mode_at >= self.asked_at):
+                # (PX4: said after the request, so a mode it was leaving when asked does not count)
                 self.wanted = None
-            elif self.refused is not None or (t - self.asked_at >= MODE_RETRY and self.tries >= MODE_TRIES):
-                why = self.refused or f"the autopilot did not switch to {mode_name(self.wanted)}"
+            elif self.refused is not None or (t - self.asked_at >= r.mode_retry and self.tries >= r.mode_tries):
+                why = self.refused or f"the autopilot did not switch to {self.mode_name(self.wanted)}"
                 self.wanted = None
                 if self.engaged:
                     return why
-            elif t - self.asked_at >= MODE_RETRY:
+            elif t - self.asked_at >= r.mode_retry:
                 self._request_mode(t)
         if not self.engaged:
             return None
         if not s.armed:
             return "the autopilot was disarmed, not by the companion: return ended"
-        if s.mode == GUIDED:
+        if s.mode == r.drive and (r.lead is None or (self.switch_at is None and self.wanted is None)):
             self.confirmed = True
-        elif s.mode is not None and (self.confirmed or s.mode != self.mode_at_engage):
-            return f"the autopilot switched to {mode_name(s.mode)}, not by the companion: return ended"
-        if s.mode == GUIDED and t >= self.next_target:
+        elif s.mode is not None and (self.confirmed or not self._unconfirmed_ok(s.mode)):
+            return f"the autopilot switched to {self.mode_name(s.mode)}, not by the companion: return ended"
+        streaming = s.mode == r.drive or r.lead is not None  # PX4: the stream runs before, and into, Offboard
+        if streaming and t >= self.next_target:
             self.next_target = t + TARGET_PERIOD
             self._target()
+        if self.switch_at is not None and t >= self.switch_at:
+            self.switch_at = None
+            self._ask(r.drive, t)
         return None
 
+    def _unconfirmed_ok(self, mode: int) -> bool:
+        """Whether ``mode``, seen before the autopilot confirmed the companion's drive mode, is no one's choice:
+        the mode the return found (ArduPilot), or also PX4's Offboard and the Hold its Offboard loss of the owner's
+        dead stream leads to (PX4)."""
+        if mode == self.mode_at_engage:
+            return True
+        return self.rules.lead is not None and mode in (self.rules.drive, self.rules.hold)
+
+    def mode_name(self, mode: int | None) -> str:
+        """``mode`` as the autopilot driven names it."""
+        return self.rules.mode_name(mode)
+
     def _target(self) -> None:
-        """One velocity + turn-rate target in the body frame (position, acceleration and yaw ignored)."""
+        """One velocity + turn-rate target in the body frame (position, acceleration and yaw ignored; PX4: a speed
+        and a bearing, ``px4.velocity_target``)."""
         assert self.enc is not None
         speed, yaw_rate = self.command_out
+        if self.rules is PX4Rules:
+            self._px4_target(speed, yaw_rate)
+            return
         if not self.pivots and abs(speed) < 0.05 and abs(yaw_rate) > 0.05:
             speed = CREEP * self.direction
         mask = 0b0000_0101_1100_0111  # ignore x y z, ax ay az, yaw: use vx vy vz and yaw rate
@@ -310,12 +418,51 @@ class AutopilotDriver:
             0, self.seen.sysid, self.seen.compid, apm.MAV_FRAME_BODY_NED, mask, 0, 0, 0, speed, 0, 0, 0, 0, 0, 0,
             yaw_rate))
 
-    def stop(self) -> bool:
+    def resume(self, t: float) -> None:
+        """Back to the drive mode the owner was driving in (PX4: Offboard, after a Hold that nobody on the ground
+        asked for; ``Companion._resume_drive``)."""
+        self._ask(self.rules.drive, t)
+
+    def _px4_target(self, speed: float, yaw_rate: float) -> None:
+        """PX4's target for the vehicle's command: a speed and a bearing ahead of the turn asked for; a backward
+        command an about-turn to the heading behind, kept until it is done or the command is forward (or nothing)
+        again (``vehicle.companion.px4``). While it lasts the navigator's own turns are not passed on: they steer a
+        tail that PX4 is turning away (measured: a rover that stood stuck for 15 s, the navigator turning it back
+        toward a route it was pivoting to)."""
+        s = self.seen
+        yaw = s.attitude[1] if s.attitude is not None else None
+        if self.about is not None:
+            # done once turned (then the route lies ahead, and the navigator drives it forward), or once the
+            # navigator asks for forward speed or for nothing; never longer than a slow full turn
+            turned = yaw is not None and abs(math.remainder(yaw - self.about, math.tau)) < px4.ABOUT_DONE
+            idle = abs(speed) <= 0.05 and abs(yaw_rate) <= 0.05
+            if turned or idle or speed > 0.05 or self.targets - self.about_at > px4.ABOUT_TARGETS:
+                self.about = None
+        elif speed < -0.05 and yaw is not None:
+            self.about, self.about_at = yaw + math.pi, self.targets
+        self.targets += 1
+        if self.about is not None:
+            self.send_message(px4.bearing_target(self.enc, s.sysid, s.compid, self.about))
+        else:
+            self.send_message(px4.velocity_target(self.enc, s.sysid, s.compid, speed, yaw_rate, TARGET_PERIOD,
+                                                  self.yaw_p))
+
+    def stop(self, t: float = 0.0) -> bool:
         """A zero-velocity target: the rover stops where it is and stays in GUIDED, so a return that follows
         drives at once, with no mode switch (the companion's dead-man over the owner's drive, ``Companion``).
-        False: nothing sent (the autopilot is not in GUIDED, or not known yet)."""
-        if self.enc is None or self.seen.mode != GUIDED:
+        False: nothing sent (the autopilot is not in GUIDED, or not known yet).
+
+        PX4: Hold (AUTO_LOITER) instead, asked for at ``t``. Offboard needs a stream, so standing in Offboard would
+        mean the companion streaming stops in the owner's name, racing the owner's own setpoints when it speaks
+        again and keeping an Offboard alive that PX4 would otherwise end itself after COM_OF_LOSS_T (for the
+        same Hold: COM_OBL_RC_ACT). The return that follows streams first and switches to Offboard, a fifth of a
+        second."""
+        if self.enc is None or self.seen.mode != self.rules.drive:
             return False
+        if self.rules.stop_holds:
+            if self.wanted != self.rules.hold:
+                self._ask(self.rules.hold, t)
+            return True
         mask = 0b0000_0101_1100_0111  # as ``_target``: velocity and yaw rate used, all zero
         self.send_message(self.enc.set_position_target_local_ned_encode(
             0, self.seen.sysid, self.seen.compid, apm.MAV_FRAME_BODY_NED, mask, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0))
@@ -323,7 +470,7 @@ class AutopilotDriver:
 
     def _keepalive(self) -> None:
         s = self.seen
-        gcs = next((int(s.params[p]) for p in GCS_SYSID_PARAMS if p in s.params), 255)
+        gcs = next((int(s.params[p]) for p in self.rules.gcs_sysid_params if p in s.params), 255)
         if not 1 <= gcs <= 255:
             gcs = 255
         self.keepalive_enc.srcSystem = gcs
@@ -338,17 +485,19 @@ class AutopilotDriver:
         self.next_stream_check = t + STREAM_CHECK
         s = self.seen
         assert self.enc is not None and s.sysid is not None
-        wanted = 0.8 * 1e6 / STREAMS[apm.MAVLINK_MSG_ID_LOCAL_POSITION_NED]
+        streams = self.rules.streams
+        wanted = 0.8 * 1e6 / streams[apm.MAVLINK_MSG_ID_LOCAL_POSITION_NED]
         if not self.streams_asked or s.rate(t) < wanted:
-            for msgid, interval in STREAMS.items():
+            for msgid, interval in streams.items():
                 self.send_message(self.enc.command_long_encode(s.sysid, s.compid, apm.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
                                                         msgid, interval, 0, 0, 0, 0, 0))
             self.streams_asked = True
         if s.origin is None:
             self.send_message(self.enc.command_long_encode(s.sysid, s.compid, apm.MAV_CMD_REQUEST_MESSAGE, 0,
                                                     apm.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, 0, 0, 0, 0, 0, 0))
-        if not any(p in s.params for p in GCS_SYSID_PARAMS):
-            for name in GCS_SYSID_PARAMS:
+        asks = self.rules.gcs_sysid_params if self.rules is ArduPilotRules else ("RO_YAW_P",)
+        if not any(p in s.params for p in asks):
+            for name in asks:
                 self.send_message(self.enc.param_request_read_encode(s.sysid, s.compid, name.encode(), -1))
 
     def send_message(self, msg, enc: apm.MAVLink | None = None) -> None:

@@ -1,8 +1,8 @@
 """``returnlink companion``: the companion on a real computer, between an autopilot's telemetry port and a radio.
 
 The imperative shell around ``vehicle.companion.app.Companion``: it opens the connections, checks that an
-ArduPilot Rover answers on the autopilot's, runs the 50 Hz loop on the wall clock and serves every link between
-ticks. ``--check`` and ``--configure`` talk to the autopilot about its parameters and leave.
+ArduPilot Rover or a PX4 rover answers on the autopilot's, runs the 50 Hz loop on the wall clock and serves every
+link between ticks. ``--check`` and ``--configure`` talk to the autopilot about its parameters and leave.
 
 ``--gcs`` may be given several times (the telemetry radio and a network, docs/architecture.md §11.1): whatever goes
 to the ground goes to every ground link, and what comes from any of them reaches the companion tagged with its link
@@ -21,6 +21,7 @@ import argparse
 import os
 import select
 import signal
+import struct
 import sys
 import time
 from collections.abc import Hashable
@@ -31,7 +32,7 @@ from typing import Any, NamedTuple
 from link import args as types
 from vehicle.companion.app import Companion
 from vehicle.companion.links import Conn, ConnError, Framer, open_link, parse_conn, require_device
-from vehicle.companion.setup import check, differing, report
+from vehicle.companion.setup import check, differing, needs_for, report
 from vehicle.companion.tlog import FROM_AUTOPILOT, FROM_GROUND, TO_AUTOPILOT, TO_GROUND, Tlog, TlogError
 from vehicle.port import DT
 
@@ -42,8 +43,8 @@ REPORT_EVERY = 10.0  # s between reports of the same ground link failing
 
 
 def add_parser(sub) -> None:
-    c = sub.add_parser("companion", help="run returnlink beside an ArduPilot Rover, between its telemetry port "
-                                         "and the ground-station radio (docs/architecture.md §11)")
+    c = sub.add_parser("companion", help="run returnlink beside an ArduPilot Rover or a PX4 rover, between its "
+                                         "telemetry port and the ground-station radio (docs/architecture.md §11)")
     c.add_argument("--autopilot", required=True, metavar="CONN",
                    help="the autopilot: serial:/dev/ttyAMA0:921600, tcp:HOST:PORT, udpin:HOST:PORT, udpout:HOST:PORT")
     c.add_argument("--gcs", metavar="CONN", action="append",
@@ -219,14 +220,22 @@ class CompanionLoop:
         return {n: d.seen.params[n] for n in names if n in d.seen.params}
 
     def set_param(self, name: str, value: float) -> bool:
+        """PARAM_SET in the parameter's own type and the autopilot's encoding (PX4: bytewise, and a PARAM_SET of
+        another type is ignored), then whether the autopilot answered with ``value``."""
         d = self.companion.driver
         ptype = d.seen.param_types.get(name, 9)  # (MAV_PARAM_TYPE_REAL32 if never seen)
+        wire = d.rules.param_wire(value, ptype)
         for _ in range(3):
             d.seen.params.pop(name, None)
-            d.send_message(d.enc.param_set_encode(d.seen.sysid, d.seen.compid, name.encode(), value, ptype))
+            d.send_message(d.enc.param_set_encode(d.seen.sysid, d.seen.compid, name.encode(), wire, ptype))
             if self.run_for(PARAM_RETRY * 2, lambda: name in d.seen.params):
-                return d.seen.params[name] == value
+                return d.seen.params[name] == _float32(value)
         return False
+
+
+def _float32(value: float) -> float:
+    """``value`` as a REAL32 parameter holds it (what the autopilot answers)."""
+    return struct.unpack("<f", struct.pack("<f", value))[0]
 
 
 def _connect(conn, wait: float):
@@ -308,7 +317,8 @@ def _serve(shell: CompanionLoop, args: argparse.Namespace, ap_conn: Conn, gcs_co
     if not heard:
         return fail(f"no autopilot heartbeat on {ap_conn.text} within {args.wait:g} s")
     if c.identity_problem:
-        return fail(f"{ap_conn.text}: {c.identity_problem}; companion mode drives ArduPilot Rover only")
+        return fail(f"{ap_conn.text}: {c.identity_problem}; companion mode drives ArduPilot Rover and PX4 rovers "
+                    f"only")
     if args.check or args.configure:
         return _configure(shell, args.configure)
     stop = []
@@ -333,9 +343,10 @@ def _announce(shell: CompanionLoop, ap_text: str, gcs_text: str, keystore) -> No
     """The banner, and a warning (stderr and STATUSTEXT) if the backstop is not set up."""
     c = shell.companion
     d = c.driver.seen
-    rows = check(shell.read_params([r.need.name for r in check({})] + ["MAV_GCS_SYSID", "SYSID_MYGCS"]))
+    needs = needs_for(d.autopilot)
+    rows = check(shell.read_params([n.name for n in needs] + list(c.driver.rules.gcs_sysid_params)), needs)
     gcs_sysid = int(d.params.get("MAV_GCS_SYSID", d.params.get("SYSID_MYGCS", 255)))
-    print(f"returnlink companion: ArduPilot Rover (system {d.sysid}) on {ap_text}, ground side on {gcs_text}; "
+    print(f"returnlink companion: {c.driver.rules.name} (system {d.sysid}) on {ap_text}, ground side on {gcs_text}; "
           f"component 191, keepalive as system {gcs_sysid}"
           + ("" if keystore is None else f"; signing with key {keystore.key.fingerprint}"), file=sys.stderr,
           flush=True)
@@ -349,8 +360,9 @@ def _announce(shell: CompanionLoop, ap_text: str, gcs_text: str, keystore) -> No
 
 
 def _configure(shell: CompanionLoop, configure: bool) -> int:
-    names = [r.need.name for r in check({})]
-    rows = check(shell.read_params(names))
+    needs = needs_for(shell.companion.driver.seen.autopilot)
+    names = [n.name for n in needs]
+    rows = check(shell.read_params(names), needs)
     if not configure:
         print(report(rows))
         return 1 if differing(rows) else 0
@@ -363,7 +375,7 @@ def _configure(shell: CompanionLoop, configure: bool) -> int:
         else:
             failed = True
             print(f"returnlink: error: the autopilot did not take {r.need.name} = {new:g}", file=sys.stderr)
-    rows = check(shell.read_params(names))
+    rows = check(shell.read_params(names), needs)
     if not failed and not differing(rows):
         print("the autopilot is set up for companion mode")
     print(report(rows))

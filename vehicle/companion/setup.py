@@ -7,6 +7,16 @@ here, so the check, the configure step and the warning at start-up all read the 
 The backstop needs the autopilot's GCS failsafe on, with an action that stops the rover, and a timeout that a 1 Hz
 keepalive never trips but a dead companion does within seconds. The companion commands the autopilot with its own
 system id, so the autopilot must accept MAVLink from system ids outside its ground-station range.
+
+PX4 (``PX4_NEEDS``, docs/architecture.md §11.2) has two failsafes in the backstop: its data-link loss (NAV_DLL_ACT
+after COM_DL_LOSS_T without a GCS heartbeat: the companion's keepalive is the only one it hears) for a companion
+that dies at any time, and its Offboard loss (COM_OBL_RC_ACT after COM_OF_LOSS_T without a setpoint) for one that
+dies mid-return. The Offboard loss is also the dead-man over the owner's own Offboard drive: when the owner falls
+silent PX4 must not drive on to its last setpoint, so COM_OF_LOSS_T is the native rover's teleop timeout, 0.5 s
+(measured in the tunnel, seed 1: at PX4's default 1 s the rover drove 0.4 m deeper before it stopped and the link
+came back 0.6 s later). Both must be Hold: PX4's Return is a straight drive
+to the launch point through whatever lies between, and its Offboard-loss default, Position mode, needs sticks a
+rover driven from a companion does not have. PX4 takes commands from any system id: nothing to open there.
 """
 
 from __future__ import annotations
@@ -37,6 +47,24 @@ NEEDS: tuple[Need, ...] = (
          lambda v: v == 0, lambda v: 0.0),
 )
 
+PX4_NEEDS: tuple[Need, ...] = (
+    Need("NAV_DLL_ACT", "1", "the backstop: a dead companion (no keepalive) ends in Hold, not Return's straight drive",
+         lambda v: v == 1, lambda v: 1.0),
+    Need("COM_DL_LOSS_T", "2..5", "s without the 1 Hz keepalive before the data-link failsafe",
+         lambda v: 2 <= v <= 5, lambda v: min(5.0, max(2.0, v))),
+    Need("COM_OF_LOSS_T", "0.3..0.5", "s of Offboard silence before Hold: the owner's drive stops as soon as the "
+         "native rover's teleop does, a dead companion's return too",
+         lambda v: 0.3 <= v <= 0.5, lambda v: min(0.5, max(0.3, v))),
+    Need("COM_OBL_RC_ACT", "5", "a companion dead mid-return leaves the rover in Hold (Offboard loss)",
+         lambda v: v == 5, lambda v: 5.0),
+)
+
+
+def needs_for(autopilot: int | None) -> tuple[Need, ...]:
+    """The parameters the companion needs of the autopilot its HEARTBEAT names (MAV_AUTOPILOT: 12 PX4, else
+    ArduPilot's)."""
+    return PX4_NEEDS if autopilot == 12 else NEEDS
+
 
 @dataclass(frozen=True)
 class Row:
@@ -48,9 +76,9 @@ class Row:
         return self.value is None or self.need.ok(self.value)
 
 
-def check(values: dict[str, float]) -> list[Row]:
-    """Each need against the autopilot's ``values``."""
-    return [Row(n, values.get(n.name)) for n in NEEDS]
+def check(values: dict[str, float], needs: tuple[Need, ...] = NEEDS) -> list[Row]:
+    """Each need (ArduPilot's unless told) against the autopilot's ``values``."""
+    return [Row(n, values.get(n.name)) for n in needs]
 
 
 def differing(rows: list[Row]) -> list[Row]:
