@@ -499,39 +499,56 @@ def _cmd_sim_serve_firmware(args: argparse.Namespace, sc) -> int:
 
 def _cmd_sim_serve_px4(args: argparse.Namespace, sc) -> int:
     """`sim serve --vehicle px4rover`: PX4, paced to the wall clock, behind the radio proxy, flying its own data-link
-    failsafe (--policy px4-hold or px4-return)."""
+    failsafe (--policy px4-hold or px4-return), or with returnlink companion on its telemetry link (--policy
+    companion)."""
+    from link.storage import StoredFileError
     from sim.firmware.process import stop_on_terminate
     from sim.firmware.report import trajectory
-    from sim.policies import PX4_FAILSAFE_POLICIES
+    from sim.policies import COMPANION_POLICY
     from sim.px4.locate import ENV
     from sim.px4.lockstep import PX4Unusable
     from sim.px4.process import PX4Error
-    from sim.px4.serve import PX4Server
+    from sim.px4.serve import PX4CompanionServer, PX4Server
 
     policy = _policy_for(args, "px4rover")
-    if policy not in PX4_FAILSAFE_POLICIES:
-        raise _fail(f"sim serve --vehicle px4rover flies PX4's own data-link failsafe: --policy "
-                    f"{' or '.join(PX4_FAILSAFE_POLICIES)} (got {policy})")
+    companion = policy == COMPANION_POLICY
     if args.firmware:
         raise _fail("--firmware goes with --vehicle ardurover; PX4 is found by --px4 DIR or RETURNLINK_PX4")
-    for flag in ("params", "key", "state"):
-        if getattr(args, flag):
-            raise _fail(f"--{flag} configures returnlink's own vehicle; PX4 keeps its parameters and signing in "
-                        "itself (set them over MAVLink)")
+    if not companion:
+        for flag in ("params", "key", "state"):
+            if getattr(args, flag):
+                raise _fail(f"--{flag} configures returnlink's own vehicle (or, with --policy companion, the "
+                            "companion); PX4 keeps its parameters and signing in itself (set them over MAVLink)")
     px4 = _px4(args.px4)
     out = Path(args.out) if args.out else Path("out") / f"serve-{sc.name}-px4rover"
     _writable_dir(out)
     peers = tuple(args.peer) if args.peer else (("127.0.0.1", 14550), ("127.0.0.1", 14540))
     try:
-        server = PX4Server(sc, args.seed, policy, px4, args.port, peers, args.perfect_link, args.speedup,
-                           args.duration, log_path=out / "px4.log")
+        if companion:
+            params = _parm_file(args.params)
+            state = _serve_state(args)
+            if state is None:
+                return 2
+            keystore, epochs = state
+            server = PX4CompanionServer(sc, args.seed, px4, args.port, peers, args.perfect_link, args.speedup,
+                                        args.duration, log_path=out / "px4.log", param_file=params,
+                                        keystore=keystore, epochs_file=epochs)
+            _warn_heartbeat_speedup(args.speedup, server.companion.params["LNK_TIMEOUT"], "companion")
+        else:
+            keystore = None
+            server = PX4Server(sc, args.seed, policy, px4, args.port, peers, args.perfect_link, args.speedup,
+                               args.duration, log_path=out / "px4.log")
+    except StoredFileError as e:  # a damaged kept file: refuse to start rather than boot on defaults
+        raise _fail(str(e)) from None
     except OSError as e:
         print(f"returnlink: error: cannot bind 127.0.0.1:{args.port}: {e}", file=sys.stderr)
         return 2
     host, port = server.address
-    print(f"returnlink: {sc.name} with PX4 ({px4}, policy {policy}) on udp {host}:{port}, sending to "
-          + ", ".join(f"{h}:{p}" for h, p in peers) + ("" if args.perfect_link else ", through the radio model"),
-          file=sys.stderr, flush=True)
+    what = "returnlink companion on its telemetry link" if companion else f"policy {policy}"
+    print(f"returnlink: {sc.name} with PX4 ({px4}, {what}) on udp {host}:{port}, sending to "
+          + ", ".join(f"{h}:{p}" for h, p in peers) + ("" if args.perfect_link else ", through the radio model")
+          + ("" if keystore is None else f"; the companion signs with key {keystore.key.fingerprint} from "
+             f"{keystore.path}"), file=sys.stderr, flush=True)
     try:
         with stop_on_terminate():
             server.run()
@@ -728,7 +745,8 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--policy", choices=(*FAILSAFE_POLICIES, COMPANION_POLICY, *PX4_FAILSAFE_POLICIES),
                        help="with --vehicle ardurover: its GCS failsafe (default ardupilot-smartrtl), or companion: "
                             "returnlink companion on its telemetry port (--params, --key, --state configure it); "
-                            "with --vehicle px4rover: px4-hold or px4-return (default), PX4's data-link failsafe")
+                            "with --vehicle px4rover: px4-hold or px4-return (default), PX4's data-link failsafe, or "
+                            "companion")
     _add_firmware_option(serve)
     _add_px4_option(serve)
     serve.add_argument("--seed", type=types.SEED)

@@ -117,3 +117,63 @@ def test_no_px4_at_all_names_both_ways_to_give_one():
     done = _serve(["tunnel", "--vehicle", "px4rover", "--duration", "1"], _env(RETURNLINK_PX4=""))
     assert done.returncode == 2
     assert "--px4" in done.stderr and "RETURNLINK_PX4" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_a_ground_station_takes_control_through_the_companion_beside_served_px4(tmp_path):
+    """`sim serve --vehicle px4rover --policy companion`: PX4's own stream and the companion's reach an ordinary
+    ground station, which takes control through the companion (the lease the companion keeps)."""
+    import io
+    import threading
+
+    from pymavlink.dialects.v20 import ardupilotmega as apm
+
+    from gcs.station import GroundStation
+    from gcs.station import mav as gmav
+    from sim.px4.serve import PX4CompanionServer
+    from sim.scenario import load
+    from vehicle.companion.router import COMPANION_COMPID
+
+    px4 = px4_or_skip()
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    gcs.bind(("127.0.0.1", 0))
+    gcs.settimeout(0.05)
+    speedup = 5.0
+    server = PX4CompanionServer(load("tunnel"), 1, px4, port=0, peers=(gcs.getsockname(),), perfect_link=True,
+                                speedup=speedup, duration=40.0, out=io.StringIO(),
+                                epochs_file=tmp_path / "returnlink.epochs")
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    gs = None  # addressed once the companion is heard: PX4's system id is its instance's (MAV_SYS_ID)
+    parser = apm.MAVLink(None, srcSystem=255, srcComponent=190)
+    heard: dict[int, object] = {}
+    pending, owned, t0 = None, None, time.monotonic()
+    try:
+        while thread.is_alive() and time.monotonic() - t0 < 90:
+            now = (time.monotonic() - t0) * speedup  # the station's once-a-second cadence in simulated time
+            for frame in gs.tick(now) if gs is not None else ():
+                gcs.sendto(frame, server.address)
+            try:
+                data, _ = gcs.recvfrom(65535)
+            except TimeoutError:
+                continue
+            for m in parser.parse_buffer(data) or ():
+                if m.get_type() == "HEARTBEAT":
+                    heard[m.get_srcComponent()] = m
+                    if gs is None and m.get_srcComponent() == COMPANION_COMPID:
+                        gs = GroundStation(255, 190, target=m.get_srcSystem(), target_comp=COMPANION_COMPID)
+            if gs is None:
+                continue
+            gs.feed(data, now)
+            if pending is None and gs.vehicle.status is not None:
+                pending = gs.acquire()
+            if owned is None and pending is not None and pending.done and gs.vehicle.status.owner == 255:
+                owned = gs.vehicle.status
+    finally:
+        thread.join(90)
+        gcs.close()
+    assert any(m.autopilot == apm.MAV_AUTOPILOT_PX4 for m in heard.values())  # PX4's own heartbeat, relayed
+    assert COMPANION_COMPID in heard  # and the companion's beside it
+    assert pending is not None and pending.ok
+    assert owned is not None and owned.state == gmav.RETURNLINK_STATE_TELEOP
+    assert not thread.is_alive() and not server.link.process.alive()
+    assert "lease teleop" in server.out.getvalue()

@@ -37,6 +37,20 @@ from vehicle.params import load_defaults
 _STATE_NAMES = {v: k.lower().replace("_", " ") for k, v in vars(State).items() if k.isupper()}
 
 
+def companion_boot(scenario: Scenario, epochs: EpochLog, param_file: Path | None,
+                   keystore: KeyStore | None) -> dict:
+    """What a served companion boots with, as ``sim serve`` boots the native vehicle
+    (``sim.driver.simulated_vehicle``): the parameter file (a torn write's leftovers cleared first), else the
+    defaults, the scenario's own on top; the epochs it issued; with a key, the wall clock as its signing clock."""
+    if param_file is not None:
+        remove_leftovers(param_file)
+    params = load_defaults(param_file) if param_file is not None and param_file.is_file() else load_defaults()
+    for k, v in scenario.params.items():
+        params.set(k, v)
+    return {"params": params, "keystore": keystore, "stamp": lambda t: stamp_from_unix(time.time()),
+            "boot_epoch": epochs.boot, "param_file": param_file, "on_epoch": epochs.issued}
+
+
 class CompanionServer(FirmwareServer):
     """The firmware served with returnlink companion on its telemetry port (see the module docstring): the companion
     plant (``sim.plants.companion``), its companion booted as ``sim serve`` boots the native vehicle."""
@@ -48,18 +62,9 @@ class CompanionServer(FirmwareServer):
                  perfect_link: bool = False, speedup: float = 1.0, duration: float = math.inf,
                  log_path: Path | None = None, out=sys.stderr, param_file: Path | None = None,
                  keystore: KeyStore | None = None, epochs_file: Path | None = None) -> None:
-        # as the native vehicle boots (``sim.driver.simulated_vehicle``): the file (a torn write's leftovers
-        # cleared first), else the defaults, and the scenario's own on top
-        if param_file is not None:
-            remove_leftovers(param_file)
-        params = load_defaults(param_file) if param_file is not None and param_file.is_file() else load_defaults()
-        for k, v in scenario.params.items():
-            params.set(k, v)
         self.epochs = EpochLog(epochs_file)
         super().__init__(scenario, seed, COMPANION_POLICY, firmware, port, peers, perfect_link, speedup, duration,
-                         log_path, out, params=params, keystore=keystore,
-                         stamp=lambda t: stamp_from_unix(time.time()), boot_epoch=self.epochs.boot,
-                         param_file=param_file, on_epoch=self.epochs.issued)
+                         log_path, out, **companion_boot(scenario, self.epochs, param_file, keystore))
         self.companion = self.plant.companion
         self.to_ground = self.plant.to_ground
         self.transport.pinned = self.companion.pinned  # the owner's address is never crowded out

@@ -19,10 +19,14 @@ import sys
 import time
 from pathlib import Path
 
+from sim.firmware.companion_serve import CompanionServer, companion_boot
 from sim.firmware.serve import FirmwareServer
 from sim.plants.px4 import PX4Plant
-from sim.policies import PX4_VEHICLE
+from sim.plants.px4_companion import PX4CompanionPlant
+from sim.policies import COMPANION_POLICY, PX4_VEHICLE
 from sim.scenario import Scenario
+from vehicle.epochs import EpochLog
+from vehicle.keystore import KeyStore
 
 
 class PX4Server(FirmwareServer):
@@ -59,3 +63,33 @@ class PX4Server(FirmwareServer):
         if ahead > 0:
             time.sleep(ahead)
         return True
+
+
+class PX4CompanionServer(PX4Server):
+    """PX4 served with returnlink companion on its telemetry link (``sim serve --vehicle px4rover --policy
+    companion``): the PX4 companion plant (``sim.plants.px4_companion``), its companion booted as the ArduPilot
+    one is (``sim.firmware.companion_serve.companion_boot``: ``--params``, ``--state``, ``--key``), and the same
+    tick: PX4's frames to the companion, the ground's to the companion, the companion's to the ground."""
+
+    plant_type: type = PX4CompanionPlant
+    # the companion's tick, status line and shutdown are the ArduPilot companion server's, whatever autopilot
+    _tick = CompanionServer._tick
+    _status = CompanionServer._status
+
+    def __init__(self, scenario: Scenario, seed: int | None, px4: Path, port: int = 14580,
+                 peers: tuple[tuple[str, int], ...] = (("127.0.0.1", 14550), ("127.0.0.1", 14540)),
+                 perfect_link: bool = False, speedup: float = 1.0, duration: float = math.inf,
+                 log_path: Path | None = None, out=sys.stderr, param_file: Path | None = None,
+                 keystore: KeyStore | None = None, epochs_file: Path | None = None) -> None:
+        self.epochs = EpochLog(epochs_file)
+        super().__init__(scenario, seed, COMPANION_POLICY, px4, port, peers, perfect_link, speedup, duration,
+                         log_path, out, **companion_boot(scenario, self.epochs, param_file, keystore))
+        self.companion = self.plant.companion
+        self.to_ground = self.plant.to_ground
+        self.transport.pinned = self.companion.pinned  # the owner's address is never crowded out
+
+    def run(self) -> PX4CompanionServer:
+        try:
+            return super().run()
+        finally:
+            self.companion.close()
