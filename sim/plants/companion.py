@@ -159,7 +159,7 @@ class CompanionPlant(FirmwarePlant):
         """The companion's estimate in the true frame; the firmware's own until the companion has booted."""
         v = self.vehicle
         if v is None:
-            return self._firmware_estimate()
+            return self._autopilot_estimate()
         p = v.estimator.pose
         ox, oy = self.frame_offset
         return ox + p.x, oy + p.y

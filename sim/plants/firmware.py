@@ -26,17 +26,15 @@ from its mode timeline (``sim.firmware.metrics``).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from pathlib import Path
 
-from link.radio import LinkState, subsystem_rng
-from sim.firmware import metrics
-from sim.firmware.lockstep import DT, MODE_NAMES, SKID_PARAMS, SPEEDUP, Lockstep
+from link.radio import subsystem_rng
+from sim.firmware.lockstep import MODE_NAMES, SKID_PARAMS, SPEEDUP, Lockstep
 from sim.firmware.operator import FirmwareOperator
-from sim.jams import RADIO_EVENTS
+from sim.plants.autopilot import AutopilotPlant
 from sim.policies import COMPANION_POLICY, DEFAULT_FIRMWARE_POLICY, FAILSAFE_POLICIES, FIRMWARE_VEHICLE
 from sim.robots import make_robot
-from sim.scenario import Event, Scenario, Station
+from sim.scenario import Scenario, Station
 from vehicle.companion.setup import NEEDS
 
 # per policy; the companion's is the backstop: Hold once a dead companion's keepalive stops (docs/architecture.md §11)
@@ -74,7 +72,7 @@ def firmware_params(policy: str, lnk_timeout: float, max_speed: float,
     return params
 
 
-class FirmwarePlant:
+class FirmwarePlant(AutopilotPlant):
     """The firmware flying the scenario with its own failsafes (see the module docstring). ``link`` is the
     firmware in lockstep with ``robot`` (``Lockstep``: its process, its bridge, its ``tap``); ``rows`` its record
     per tick: (t, true x, true y, est x, est y, mode, link delivery, rssi, speed cmd, yaw rate cmd, armed,
@@ -82,11 +80,7 @@ class FirmwarePlant:
 
     kind = FIRMWARE_VEHICLE
     policies: tuple[str, ...] = FAILSAFE_POLICIES  # what this plant flies
-    leases = False
-    hears_last = True
-    report = "sim.firmware.report"
-    vehicle = None  # no returnlink aboard
-    stale = 0  # no lease to audit against
+    autopilot = "ArduPilot"
 
     def __init__(self, scenario: Scenario, kind: str = FIRMWARE_VEHICLE, seed: int | None = None,
                  policy: str = DEFAULT_FIRMWARE_POLICY, firmware: Path | None = None, log_path: Path | None = None,
@@ -130,90 +124,21 @@ class FirmwarePlant:
         self.operator = self._make_operator(self.scenario)
         return self.operator, None
 
-    def event(self, ev: Event, st, t: float) -> str | None:
-        """The operator switches to RTL when the scenario says so; leases, claims and returnlink parameters mean
-        nothing to the firmware: said, not faked."""
-        if ev.action in RADIO_EVENTS:
-            return None
-        if ev.action == "rtl" and st is not None and st.gs is not None:
-            st.gs.request_rtl(t)
-            return None
-        return f"t={ev.t:g} s: event {ev.action!r} does not apply to the ArduPilot firmware"
-
     # ----- time ----------------------------------------------------------------------------------------------
     def start(self) -> None:
         self.link.start()
         self.link.boot()
 
-    def pace(self, tick: Callable[[float], bool], duration: float) -> None:
-        """The firmware's physics time, frame by frame, with a tick each time it crosses a multiple of DT after
-        the boot (scenario time 0)."""
-        boot = self.link.boot_s
-        last, going = 0.0, True
+    def _physics_time(self) -> float:
+        return self.link.t_fw
 
-        def at_tick(t_fw: float) -> None:
-            nonlocal last, going
-            if not going:
-                return
-            t = round(t_fw - boot, 9)
-            if t <= 0:
-                return
-            last = t
-            going = tick(t)
+    def _connected(self) -> bool:
+        return self.link.fw_addr is not None
 
-        while going and last < duration - 1e-9:
-            self.link.frames(self.link.t_fw + DT, at_tick)
-
-    def close(self) -> None:
-        self.link.close()
-        if self.link.tap.version is None:
-            self.link.tap.version = "ArduRover (version not reported)"
-
-    # ----- one tick: the vehicle's side of the radio is the firmware's SERIAL0 itself ---------------------------
-    def frames(self, t: float) -> list[bytes]:
-        """Everything the firmware said since the last tick."""
-        return self.link.drain(t)
-
-    def receive(self, frames: list[tuple[bytes, str]], t: float) -> None:
-        """Straight to the firmware, before its next frame."""
-        link = self.link
-        for data, src in frames:
-            if link.fw_addr is not None:
-                link.send(data)
-                if src == self._op_name:
-                    self.heard.append(t)
-
-    def tick(self, t: float) -> None:
-        """Nothing beside the firmware, which runs its own loops between the ticks."""
-
-    def radio_status(self, state: LinkState, t: float) -> None:
-        """The firmware reads no RADIO_STATUS of its own link here: its GCS failsafe hears the radio's frames."""
-
-    # ----- the record ----------------------------------------------------------------------------------------
-    def _firmware_estimate(self) -> tuple[float, float]:
+    def _autopilot_estimate(self) -> tuple[float, float]:
+        """The firmware's EKF estimate in its local frame (its origin the start), moved into the true frame."""
         est = self.link.tap.estimate
         return (self.origin[0] + est[0], self.origin[1] + est[1]) if est is not None else (math.nan, math.nan)
 
-    estimate = _firmware_estimate
-
-    def record(self, t: float, pos: tuple[float, float], link: float, rssi: float) -> None:
-        ex, ey = self._firmware_estimate()
-        tap = self.link.tap
-        mode = -1 if tap.mode is None else tap.mode
-        self.rows.append((t, pos[0], pos[1], ex, ey, mode, link, rssi, *self.link.cmd, tap.armed,
-                          self.world.collisions))
-
-    def status(self) -> str:
-        return f"  {MODE_NAMES.get(self.link.tap.mode, '?'):<10}"
-
-    # ----- the figures ---------------------------------------------------------------------------------------
-    @property
-    def firmware_modes(self) -> list[dict]:
-        """Its mode timeline as ArduPilot names the modes (metrics.json's ``firmware_modes``)."""
-        return [{"t": round(t, 3), "mode": MODE_NAMES.get(m, str(m))} for t, m in self.link.tap.modes]
-
-    def figures(self, run) -> dict:
-        return metrics.figures(run)
-
-    def summary(self, run, m: dict) -> str:
-        return metrics.summary(run, m)
+    def _mode_name(self, mode: int) -> str:
+        return MODE_NAMES.get(mode, str(mode))

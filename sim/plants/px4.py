@@ -27,18 +27,16 @@ attributes that say what the modes mean (``mode_names``, ``return_modes``, ``dri
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from pathlib import Path
 
 from link.mission import Origin
-from link.radio import LinkState, subsystem_rng
-from sim.firmware import metrics
-from sim.jams import RADIO_EVENTS
+from link.radio import subsystem_rng
+from sim.plants.autopilot import AutopilotPlant
 from sim.policies import PX4_FAILSAFE_POLICIES, PX4_VEHICLE
-from sim.px4.lockstep import DT, HOLD, NAV_STATES, OFFBOARD, RETURN, PX4Lockstep, nav_state_name
+from sim.px4.lockstep import HOLD, NAV_STATES, OFFBOARD, RETURN, PX4Lockstep, nav_state_name
 from sim.px4.operator import RETURN_MODES, PX4Operator
 from sim.robots import make_robot
-from sim.scenario import Event, Scenario, Station
+from sim.scenario import Scenario, Station
 
 NAV_DLL_ACT = {"px4-hold": 1, "px4-return": 2}  # PX4's data-link loss action per policy: Hold, Return
 COM_OBL_RC_ACT = {"px4-hold": 5, "px4-return": 3}  # its Offboard-loss action: the same Hold (5) or Return (3)
@@ -76,18 +74,13 @@ def px4_params(policy: str, lnk_timeout: float, speed_limit: float) -> dict[str,
             "COM_DISARM_PRFLT": -1, "RO_SPEED_LIM": round(speed_limit, 3)}
 
 
-class PX4Plant:
+class PX4Plant(AutopilotPlant):
     """PX4 flying the scenario with its own data-link failsafe (see the module docstring). ``link`` is PX4 in
     lockstep with ``robot`` (``PX4Lockstep``: its process, its bridge, its ``tap``); ``rows`` its record per tick;
     ``heard`` the scenario times at which it received a frame from the operator's station."""
 
     kind = PX4_VEHICLE
     policies: tuple[str, ...] = PX4_FAILSAFE_POLICIES  # what this plant flies
-    leases = False
-    hears_last = True
-    report = "sim.firmware.report"
-    vehicle = None  # no returnlink aboard
-    stale = 0  # no lease to audit against
     # what the modes mean, for the firmware's figures and pictures
     autopilot = "PX4"
     mode_names = NAV_STATES
@@ -142,90 +135,21 @@ class PX4Plant:
         self.operator = PX4Operator(sc.route, sc.resume_route, self.geo, sc.attempts, sysid=spec.sysid)
         return self.operator, None
 
-    def event(self, ev: Event, st, t: float) -> str | None:
-        """The operator switches to Return when the scenario says so; leases, claims and returnlink parameters mean
-        nothing to PX4: said, not faked."""
-        if ev.action in RADIO_EVENTS:
-            return None
-        if ev.action == "rtl" and st is not None and st.gs is not None:
-            st.gs.request_rtl(t)
-            return None
-        return f"t={ev.t:g} s: event {ev.action!r} does not apply to PX4"
-
     # ----- time ----------------------------------------------------------------------------------------------
     def start(self) -> None:
         self.link.start()
         self.link.boot()
 
-    def pace(self, tick: Callable[[float], bool], duration: float) -> None:
-        """The physics' time, step by step, with a tick each time it crosses a multiple of DT after the boot
-        (scenario time 0)."""
-        boot = self.link.boot_s
-        last, going = 0.0, True
+    def _physics_time(self) -> float:
+        return self.link.t_sim
 
-        def at_tick(t_sim: float) -> None:
-            nonlocal last, going
-            if not going:
-                return
-            t = round(t_sim - boot, 9)
-            if t <= 0:
-                return
-            last = t
-            going = tick(t)
-
-        while going and last < duration - 1e-9:
-            self.link.frames(self.link.t_sim + DT, at_tick)
-
-    def close(self) -> None:
-        self.link.close()
-        if self.link.tap.version is None:
-            self.link.tap.version = "PX4 (version not reported)"
-
-    # ----- one tick: the vehicle's side of the radio is PX4's GCS link itself -----------------------------------
-    def frames(self, t: float) -> list[bytes]:
-        """Everything PX4 said on its GCS link since the last tick."""
-        return self.link.drain(t)
-
-    def receive(self, frames: list[tuple[bytes, str]], t: float) -> None:
-        """Straight to PX4, before its next physics step."""
-        for data, src in frames:
-            self.link.send(data)
-            if src == self._op_name:
-                self.heard.append(t)
-
-    def tick(self, t: float) -> None:
-        """Nothing beside PX4, which runs its own modules between the ticks."""
-
-    def radio_status(self, state: LinkState, t: float) -> None:
-        """PX4 reads no RADIO_STATUS of its own link here: its data-link failsafe hears the radio's frames."""
-
-    # ----- the record ----------------------------------------------------------------------------------------
-    def estimate(self) -> tuple[float, float]:
+    def _autopilot_estimate(self) -> tuple[float, float]:
+        """EKF2's estimate, which the lockstep's tap reads in the true frame."""
         est = self.link.tap.estimate
         return est if est is not None else (math.nan, math.nan)
 
-    def record(self, t: float, pos: tuple[float, float], link: float, rssi: float) -> None:
-        ex, ey = self.estimate()
-        tap = self.link.tap
-        mode = -1 if tap.mode is None else tap.mode
-        self.rows.append((t, pos[0], pos[1], ex, ey, mode, link, rssi, *self.link.cmd, tap.armed,
-                          self.world.collisions))
-
-    def status(self) -> str:
-        mode = self.link.tap.mode
-        return f"  {'?' if mode is None else nav_state_name(mode):<12}"
-
-    # ----- the figures ---------------------------------------------------------------------------------------
-    @property
-    def firmware_modes(self) -> list[dict]:
-        """Its nav-state timeline as PX4 names the states (metrics.json's ``firmware_modes``)."""
-        return [{"t": round(t, 3), "mode": nav_state_name(m)} for t, m in self.link.tap.modes]
-
-    def figures(self, run) -> dict:
-        return metrics.figures(run)
-
-    def summary(self, run, m: dict) -> str:
-        return metrics.summary(run, m)
+    def _mode_name(self, mode: int) -> str:
+        return nav_state_name(mode)
 
 
 __all__ = ["HOLD", "OFFBOARD", "RETURN", "PX4Plant", "px4_params"]

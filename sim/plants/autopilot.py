@@ -1,0 +1,137 @@
+"""What the plants of the real autopilots share: the ArduPilot firmware (``sim.plants.firmware``) and PX4
+(``sim.plants.px4``), each a separate process driving the scenario's pymunk rover in lockstep, its MAVLink link the
+vehicle's side of the radio.
+
+Both are paced by their lockstep (the physics steps while the autopilot waits for its answers, so the loop's tick
+comes from the physics' own time), hear what the radio delivered before their next step (``hears_last``), have no
+returnlink aboard (no leases, nothing to audit), keep their record as rows of their own, and are judged from their
+mode timeline (``sim.firmware.metrics``, ``sim.firmware.report``, which read the modes' meaning from the plant).
+What differs is said by the subclass: its name, its lockstep's clock, its estimate and its modes' names.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from link.radio import LinkState
+from sim.firmware import metrics
+from sim.jams import RADIO_EVENTS
+from sim.scenario import Event
+
+DT = 0.02  # the loop's tick (sim.plants.native.TICK_RATE): what moves around the autopilot moves at this pace
+
+
+class AutopilotPlant:
+    """The shared half of an autopilot's plant (see the module docstring). A subclass sets ``link`` (its lockstep:
+    ``tap``, ``cmd``, ``boot_s``, ``frames``, ``drain``, ``send``, ``close``), ``world``, ``rows``, ``heard`` and
+    ``_op_name``, and says the four things below that differ."""
+
+    autopilot = "the autopilot"  # its name in notes and pictures
+    hears_last = True
+    leases = False
+    report = "sim.firmware.report"
+    vehicle = None  # no returnlink aboard
+    stale = 0  # no lease to audit against
+
+    # ----- what differs ------------------------------------------------------------------------------------------
+    def _physics_time(self) -> float:
+        """The lockstep's physics time, on which the autopilot's own clock runs."""
+        raise NotImplementedError
+
+    def _connected(self) -> bool:
+        """Whether what is sent reaches the autopilot now (the ArduPilot firmware's address is known only once it
+        has spoken)."""
+        return True
+
+    def _autopilot_estimate(self) -> tuple[float, float]:
+        """The autopilot's own position estimate in the true frame (nan, nan: none yet)."""
+        raise NotImplementedError
+
+    def _mode_name(self, mode: int) -> str:
+        """The autopilot's name of a mode number."""
+        raise NotImplementedError
+
+    # ----- the scenario around it ----------------------------------------------------------------------------
+    def event(self, ev: Event, st, t: float) -> str | None:
+        """The operator asks for the autopilot's return when the scenario says so; leases, claims and returnlink
+        parameters mean nothing to it: said, not faked."""
+        if ev.action in RADIO_EVENTS:
+            return None
+        if ev.action == "rtl" and st is not None and st.gs is not None:
+            st.gs.request_rtl(t)
+            return None
+        return f"t={ev.t:g} s: event {ev.action!r} does not apply to {self.autopilot}"
+
+    # ----- time ----------------------------------------------------------------------------------------------
+    def pace(self, tick: Callable[[float], bool], duration: float) -> None:
+        """The physics' time, step by step, with a tick each time it crosses a multiple of DT after the boot
+        (scenario time 0)."""
+        boot = self.link.boot_s
+        last, going = 0.0, True
+
+        def at_tick(t_phys: float) -> None:
+            nonlocal last, going
+            if not going:
+                return
+            t = round(t_phys - boot, 9)
+            if t <= 0:
+                return
+            last = t
+            going = tick(t)
+
+        while going and last < duration - 1e-9:
+            self.link.frames(self._physics_time() + DT, at_tick)
+
+    def close(self) -> None:
+        self.link.close()
+        if self.link.tap.version is None:
+            self.link.tap.version = f"{self.autopilot} (version not reported)"
+
+    # ----- one tick: the vehicle's side of the radio is the autopilot's MAVLink link itself ---------------------
+    def frames(self, t: float) -> list[bytes]:
+        """Everything the autopilot said since the last tick."""
+        return self.link.drain(t)
+
+    def receive(self, frames: list[tuple[bytes, str]], t: float) -> None:
+        """Straight to the autopilot, before its next physics step."""
+        for data, src in frames:
+            if self._connected():
+                self.link.send(data)
+                if src == self._op_name:
+                    self.heard.append(t)
+
+    def tick(self, t: float) -> None:
+        """Nothing beside the autopilot, which runs its own loops between the ticks."""
+
+    def radio_status(self, state: LinkState, t: float) -> None:
+        """The autopilot reads no RADIO_STATUS of its own link here: its failsafe hears the radio's frames."""
+
+    # ----- the record ----------------------------------------------------------------------------------------
+    def estimate(self) -> tuple[float, float]:
+        return self._autopilot_estimate()
+
+    def record(self, t: float, pos: tuple[float, float], link: float, rssi: float) -> None:
+        ex, ey = self._autopilot_estimate()
+        tap = self.link.tap
+        mode = -1 if tap.mode is None else tap.mode
+        self.rows.append((t, pos[0], pos[1], ex, ey, mode, link, rssi, *self.link.cmd, tap.armed,
+                          self.world.collisions))
+
+    def status(self) -> str:
+        mode = self.link.tap.mode
+        return f"  {'?' if mode is None else self._mode_name(mode):<12}"
+
+    # ----- the figures ---------------------------------------------------------------------------------------
+    @property
+    def firmware_modes(self) -> list[dict]:
+        """Its mode timeline as the autopilot names its modes (metrics.json's ``firmware_modes``)."""
+        return [{"t": round(t, 3), "mode": self._mode_name(m)} for t, m in self.link.tap.modes]
+
+    def figures(self, run) -> dict:
+        return metrics.figures(run)
+
+    def summary(self, run, m: dict) -> str:
+        return metrics.summary(run, m)
+
+
+__all__ = ["DT", "AutopilotPlant"]
