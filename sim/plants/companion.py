@@ -39,30 +39,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pymavlink.dialects.v20 import ardupilotmega as apm
-
 from gcs.plans import from_plan_items
-from link.proxy import RadioReport
-from link.radio import LinkState
-from sim import metrics
 from sim.firmware.companion_operator import CompanionOperator
 from sim.firmware.lockstep import SPEEDUP
 from sim.firmware.process import FirmwareError
+from sim.plants.beside import CompanionSide
 from sim.plants.firmware import FirmwarePlant
 from sim.policies import COMPANION_POLICY, FIRMWARE_VEHICLE
-from sim.scenario import Event, Scenario
-from vehicle.companion import router
-from vehicle.companion.app import Companion
-from vehicle.lease import Holder
+from sim.scenario import Scenario
 from vehicle.params import Params, load_defaults
 
-# what a forwarded frame needs to be audited: it changes the robot's state under a lease
-_AUDITED = frozenset((router.Authority.LEASE, router.Authority.MODE))
-_COMPID_AT = {0xFD: 6, 0xFE: 4}  # MAVLink 2 / 1 start byte -> the byte that holds the sender's component id
-AIR_RADIO = "radio"  # the source the vehicle-side radio's frames come from, on the companion's ground side
 
-
-class CompanionPlant(FirmwarePlant):
+class CompanionPlant(CompanionSide, FirmwarePlant):
     """The firmware with returnlink companion on its telemetry port (see the module docstring). ``companion`` is
     the companion; ``vehicle`` its vehicle once booted; ``forwarded`` the ground frames it passed to the firmware.
 
@@ -70,7 +58,7 @@ class CompanionPlant(FirmwarePlant):
     companion's, as ``sim serve`` boots it with its kept files and key."""
 
     policies = (COMPANION_POLICY,)
-    leases = True
+    FAILURE = FirmwareError
 
     def __init__(self, scenario: Scenario, kind: str = FIRMWARE_VEHICLE, seed: int | None = None,
                  policy: str = COMPANION_POLICY, firmware: Path | None = None, log_path: Path | None = None,
@@ -80,114 +68,8 @@ class CompanionPlant(FirmwarePlant):
             params = load_defaults()
             for k, v in scenario.params.items():
                 params.set(k, v)
-        self.to_ground: list[bytes] = []
-        self.companion = Companion(params, self._to_autopilot, self.to_ground.append, seed=self.seed, pivots=True,
-                                   autopilot_name="the ArduPilot firmware", **companion_options)
-        self._parser = apm.MAVLink(None, 0, 0)
-        self._parser.robust_parsing = True
-        self.forwarded = 0  # ground frames the companion passed to the firmware
-        self.stale = 0  # of those, the ones the run's audit of the router found outside the operator's lease
-        self.air_radio = RadioReport()  # the vehicle-side telemetry radio: its own sequence numbers
+        self._init_companion(params, "the ArduPilot firmware", companion_options)
 
     def _make_operator(self, sc: Scenario) -> CompanionOperator:
         return CompanionOperator(sc.route, sc.resume_route, self.origin, from_plan_items(sc.plan), sc.attempts,
                                  sysid=sc.station(sc.operator_station).sysid)
-
-    @property
-    def vehicle(self):
-        """The companion's ``Vehicle`` (None until it has booted on the autopilot's estimate)."""
-        return self.companion.vehicle
-
-    # ----- the scenario around it ------------------------------------------------------------------------------
-    def event(self, ev: Event, st, t: float) -> str | None:
-        """A lease claim or a parameter change reaches the companion through the operator's station; the rest as
-        for the firmware's own failsafes."""
-        if ev.action in ("claim", "param") and (ev.station or self.scenario.operator_station) == self._op_name:
-            if ev.action == "claim":
-                self.operator.gs.claim(-1)
-            else:
-                self.operator.gs.param_set(ev.name, ev.value)
-            return None
-        return super().event(ev, st, t)
-
-    # ----- one tick: the vehicle's side of the radio is the companion ------------------------------------------
-    def frames(self, t: float) -> list[bytes]:
-        """The firmware's frames to the companion; what the companion sends the ground, through the radio."""
-        for data in self.link.drain(t):
-            self.companion.from_autopilot(data, t)
-        out = list(self.to_ground)
-        self.to_ground.clear()
-        return out
-
-    def receive(self, frames: list[tuple[bytes, str]], t: float) -> None:
-        for data, src in frames:
-            self.companion.from_ground(data, t, src)
-            if src == self._op_name:
-                self.heard.append(t)
-
-    def tick(self, t: float) -> None:
-        self.companion.tick(t)
-
-    def radio_status(self, state: LinkState, t: float) -> None:
-        """The vehicle-side radio's RADIO_STATUS, straight onto the companion's ground port (the radio sits on the
-        robot: no radio hop, no loss)."""
-        self.companion.from_ground(self.air_radio.frame(state), t, AIR_RADIO)
-
-    def _to_autopilot(self, data: bytes) -> None:
-        """The companion's wire to the firmware; a ground frame it forwards is audited on the way."""
-        at = _COMPID_AT.get(data[0]) if data else None
-        if at is not None and len(data) > at and data[at] != router.COMPANION_COMPID:
-            self.forwarded += 1
-            self._audit_forwarded(data)
-        self.link.send(data)
-
-    def _audit_forwarded(self, data: bytes) -> None:
-        """An independent check of the router, as the loop's audit checks the vehicle's guard: a forwarded
-        frame that drives the robot or changes its mode must come from the owner while the lease last announced
-        (LEASE_EVENT) is an operator's."""
-        v = self.vehicle
-        if v is None or not v.event_log:
-            return
-        for m in self._parser.parse_buffer(data) or ():
-            if m.get_type() == "BAD_DATA" or router.authority(m) not in _AUDITED:
-                continue
-            if v.event_log[-1].holder is not Holder.OPERATOR or m.get_srcSystem() != v.book.owner:
-                self.stale += 1
-
-    # ----- the record ------------------------------------------------------------------------------------------
-    def estimate(self) -> tuple[float, float]:
-        """The companion's estimate in the true frame; the firmware's own until the companion has booted."""
-        v = self.vehicle
-        if v is None:
-            return self._autopilot_estimate()
-        p = v.estimator.pose
-        ox, oy = self.frame_offset
-        return ox + p.x, oy + p.y
-
-    # ----- the figures -----------------------------------------------------------------------------------------
-    def figures(self, run) -> dict:
-        """Every figure by the native rules, from the companion's own lease record, and the firmware's version and
-        modes as for every firmware run."""
-        if self.vehicle is None:
-            raise FirmwareError(f"the companion never started: the firmware reported no position estimate in "
-                                f"{run.t:.1f} simulated s")
-        m = metrics.lease_figures(run)
-        m["frames"] = {**m["frames"], "estimator_rmse_m": "true (the companion's estimate, through the firmware's "
-                       "EKF origin: the scenario's start)"}
-        m["firmware"] = self.link.tap.version
-        m["firmware_modes"] = self.firmware_modes
-        return m
-
-    def summary(self, run, m: dict) -> str:
-        """The native summary, with the firmware, what the companion passed and refused, and the firmware's modes."""
-        lines = metrics.summary(run, m).splitlines()
-        c = self.companion.counters
-        extra = [f"  firmware {m['firmware']} (booted in {self.link.boot_s:.1f} simulated s before scenario time "
-                 f"0), returnlink companion on its telemetry port",
-                 f"  the companion forwarded {c['forwarded']} ground frames to the firmware, refused "
-                 f"{c['refused']}, relayed {c['relayed']} of the firmware's to the ground; keepalives "
-                 f"{self.companion.driver.keepalives}"]
-        modes = ["  firmware modes:"] + [f"    {e['t']:7.2f} s  {e['mode']}" for e in m["firmware_modes"]]
-        notes = [f"  note: {n}" for n in run.notes]
-        return "\n".join([lines[0], *extra, *lines[1:-1], *modes, *notes, lines[-1]])
-
