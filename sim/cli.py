@@ -434,93 +434,41 @@ def _add_run_campaign_options(run) -> None:
     run.add_argument("--no-plots", action="store_true", help="skip trajectory.png and timeline.png")
 
 
-def _cmd_sim_serve_firmware(args: argparse.Namespace, sc) -> int:
-    """`sim serve --vehicle ardurover`: the firmware, paced by itself, behind the radio proxy; with --policy companion,
-    returnlink companion between the two."""
-    from link.storage import StoredFileError
-    from sim.firmware.process import FirmwareError, stop_on_terminate
-    from sim.firmware.report import trajectory
-    from sim.firmware.serve import FirmwareServer
-    from sim.policies import COMPANION_POLICY
-
-    policy = _policy_for(args, "ardurover")
-    firmware = _firmware(args.firmware)
-    companion = policy == COMPANION_POLICY
-    if not companion:
-        for flag in ("params", "key", "state"):
-            if getattr(args, flag):
-                raise _fail(f"--{flag} configures returnlink's own vehicle (or, with --policy companion, the "
-                            "companion); the ArduPilot firmware keeps its parameters and signing in itself (set "
-                            "them over MAVLink)")
-    out = Path(args.out) if args.out else Path("out") / f"serve-{sc.name}-ardurover"
-    _writable_dir(out)
-    peers = tuple(args.peer) if args.peer else (("127.0.0.1", 14550), ("127.0.0.1", 14540))
-    try:
-        if companion:
-            from sim.firmware.companion_serve import CompanionServer
-
-            params = _parm_file(args.params)
-            state = _serve_state(args)
-            if state is None:
-                return 2
-            keystore, epochs = state
-            server = CompanionServer(sc, args.seed, firmware, args.port, peers, args.perfect_link, args.speedup,
-                                     args.duration, log_path=out / "firmware.log", param_file=params,
-                                     keystore=keystore, epochs_file=epochs)
-            _warn_heartbeat_speedup(args.speedup, server.companion.params["LNK_TIMEOUT"], "companion")
-        else:
-            keystore = None
-            server = FirmwareServer(sc, args.seed, policy, firmware, args.port, peers, args.perfect_link,
-                                    args.speedup, args.duration, log_path=out / "firmware.log")
-    except StoredFileError as e:  # a damaged kept file: refuse to start rather than boot on defaults
-        raise _fail(str(e)) from None
-    except OSError as e:
-        print(f"returnlink: error: cannot bind 127.0.0.1:{args.port}: {e}", file=sys.stderr)
-        return 2
-    host, port = server.address
-    what = ("returnlink companion on the firmware's telemetry port" if companion else f"policy {policy}")
-    print(f"returnlink: {sc.name} with the ArduPilot firmware ({firmware}, {what}) on udp {host}:{port}, "
-          "sending to " + ", ".join(f"{h}:{p}" for h, p in peers)
-          + ("" if args.perfect_link else ", through the radio model")
-          + ("" if keystore is None else f"; the companion signs with key {keystore.key.fingerprint} from "
-             f"{keystore.path}"), file=sys.stderr, flush=True)
-    try:
-        with stop_on_terminate():
-            server.run()
-    except FirmwareError as e:
-        print(f"returnlink: the firmware failed: {e}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("returnlink: stopped; the firmware was stopped", file=sys.stderr)
-    if server.rows:
-        print(f"returnlink: wrote {trajectory(server, out / 'trajectory.png')}", file=sys.stderr)
-    return 0
-
-
-def _cmd_sim_serve_px4(args: argparse.Namespace, sc) -> int:
-    """`sim serve --vehicle px4rover`: PX4, paced to the wall clock, behind the radio proxy, flying its own data-link
-    failsafe (--policy px4-hold or px4-return), or with returnlink companion on its telemetry link (--policy
-    companion)."""
+def _cmd_sim_serve_autopilot(args: argparse.Namespace, sc, kind: str) -> int:
+    """`sim serve --vehicle ardurover|px4rover`: the real autopilot behind the radio proxy, flying its own failsafe,
+    or with --policy companion returnlink companion between the two (the ArduPilot firmware paces itself; PX4 is
+    paced to the wall clock by its server)."""
     from link.storage import StoredFileError
     from sim.firmware.process import stop_on_terminate
     from sim.firmware.report import trajectory
-    from sim.policies import COMPANION_POLICY
-    from sim.px4.locate import ENV
-    from sim.px4.lockstep import PX4Unusable
-    from sim.px4.process import PX4Error
-    from sim.px4.serve import PX4CompanionServer, PX4Server
+    from sim.policies import COMPANION_POLICY, PX4_VEHICLE
 
-    policy = _policy_for(args, "px4rover")
+    policy = _policy_for(args, kind)
     companion = policy == COMPANION_POLICY
-    if args.firmware:
+    px4 = kind == PX4_VEHICLE
+    if px4 and args.firmware:
         raise _fail("--firmware goes with --vehicle ardurover; PX4 is found by --px4 DIR or RETURNLINK_PX4")
+    who = "PX4" if px4 else "the ArduPilot firmware"
     if not companion:
         for flag in ("params", "key", "state"):
             if getattr(args, flag):
                 raise _fail(f"--{flag} configures returnlink's own vehicle (or, with --policy companion, the "
-                            "companion); PX4 keeps its parameters and signing in itself (set them over MAVLink)")
-    px4 = _px4(args.px4)
-    out = Path(args.out) if args.out else Path("out") / f"serve-{sc.name}-px4rover"
+                            f"companion); {who} keeps its parameters and signing in itself (set them over MAVLink)")
+    unusable: tuple[type, ...] = ()  # a failure that says the binary given is no usable one (exit 2)
+    if px4:
+        from sim.px4.lockstep import PX4Unusable
+        from sim.px4.process import PX4Error as failure
+        from sim.px4.serve import PX4CompanionServer as companion_server
+        from sim.px4.serve import PX4Server as server_type
+
+        binary, log, unusable = _px4(args.px4), "px4.log", (PX4Unusable,)
+    else:
+        from sim.firmware.companion_serve import CompanionServer as companion_server
+        from sim.firmware.process import FirmwareError as failure
+        from sim.firmware.serve import FirmwareServer as server_type
+
+        binary, log = _firmware(args.firmware), "firmware.log"
+    out = Path(args.out) if args.out else Path("out") / f"serve-{sc.name}-{kind}"
     _writable_dir(out)
     peers = tuple(args.peer) if args.peer else (("127.0.0.1", 14550), ("127.0.0.1", 14540))
     try:
@@ -530,36 +478,39 @@ def _cmd_sim_serve_px4(args: argparse.Namespace, sc) -> int:
             if state is None:
                 return 2
             keystore, epochs = state
-            server = PX4CompanionServer(sc, args.seed, px4, args.port, peers, args.perfect_link, args.speedup,
-                                        args.duration, log_path=out / "px4.log", param_file=params,
-                                        keystore=keystore, epochs_file=epochs)
+            server = companion_server(sc, args.seed, binary, args.port, peers, args.perfect_link, args.speedup,
+                                      args.duration, log_path=out / log, param_file=params, keystore=keystore,
+                                      epochs_file=epochs)
             _warn_heartbeat_speedup(args.speedup, server.companion.params["LNK_TIMEOUT"], "companion")
         else:
             keystore = None
-            server = PX4Server(sc, args.seed, policy, px4, args.port, peers, args.perfect_link, args.speedup,
-                               args.duration, log_path=out / "px4.log")
+            server = server_type(sc, args.seed, policy, binary, args.port, peers, args.perfect_link, args.speedup,
+                                 args.duration, log_path=out / log)
     except StoredFileError as e:  # a damaged kept file: refuse to start rather than boot on defaults
         raise _fail(str(e)) from None
     except OSError as e:
         print(f"returnlink: error: cannot bind 127.0.0.1:{args.port}: {e}", file=sys.stderr)
         return 2
     host, port = server.address
-    what = "returnlink companion on its telemetry link" if companion else f"policy {policy}"
-    print(f"returnlink: {sc.name} with PX4 ({px4}, {what}) on udp {host}:{port}, sending to "
+    where = "its telemetry link" if px4 else "the firmware's telemetry port"
+    what = f"returnlink companion on {where}" if companion else f"policy {policy}"
+    print(f"returnlink: {sc.name} with {who} ({binary}, {what}) on udp {host}:{port}, sending to "
           + ", ".join(f"{h}:{p}" for h, p in peers) + ("" if args.perfect_link else ", through the radio model")
           + ("" if keystore is None else f"; the companion signs with key {keystore.key.fingerprint} from "
              f"{keystore.path}"), file=sys.stderr, flush=True)
     try:
         with stop_on_terminate():
             server.run()
-    except PX4Unusable as e:
-        raise _fail(f"{px4} is not a PX4 that runs here ({e}); give a working one with --px4 DIR or {ENV}=DIR "
-                    "(a ready one: ../shared/px4/, see its README.md)") from None
-    except PX4Error as e:
-        print(f"returnlink: PX4 failed: {e}", file=sys.stderr)
+    except failure as e:
+        if isinstance(e, unusable):
+            from sim.px4.locate import ENV
+
+            raise _fail(f"{binary} is not a PX4 that runs here ({e}); give a working one with --px4 DIR or "
+                        f"{ENV}=DIR (a ready one: ../shared/px4/, see its README.md)") from None
+        print(f"returnlink: {who} failed: {e}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print("returnlink: stopped; PX4 was stopped", file=sys.stderr)
+        print(f"returnlink: stopped; {who} was stopped", file=sys.stderr)
     if server.rows:
         print(f"returnlink: wrote {trajectory(server, out / 'trajectory.png')}", file=sys.stderr)
     return 0
@@ -605,10 +556,8 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
     sc = _scenario(args.scenario, args.seed)
     if args.px4 and args.vehicle != "px4rover":
         raise _fail(f"--px4 goes with --vehicle px4rover (got vehicle {args.vehicle or sc.vehicle})")
-    if args.vehicle == FIRMWARE_VEHICLE:
-        return _cmd_sim_serve_firmware(args, sc)
-    if args.vehicle == "px4rover":
-        return _cmd_sim_serve_px4(args, sc)
+    if args.vehicle in (FIRMWARE_VEHICLE, "px4rover"):
+        return _cmd_sim_serve_autopilot(args, sc, args.vehicle)
     if args.policy or args.firmware:
         raise _fail("--policy and --firmware go with --vehicle ardurover or px4rover (the native vehicle flies its "
                     "own plan)")
