@@ -1,4 +1,4 @@
-"""The firmware for tests: CI sets RETURNLINK_ARDUROVER, so the firmware tests always run there and a missing or
+"""The firmware and PX4 for tests: CI sets RETURNLINK_ARDUROVER, so the firmware tests always run there and a missing or
 broken binary fails them; on a machine with no firmware at all (no variable, nothing on PATH) they skip, saying so."""
 
 from __future__ import annotations
@@ -18,6 +18,25 @@ def firmware_or_skip() -> Path:
         if os.environ.get(ENV):
             pytest.fail(f"{ENV} is set but unusable: {e}")
         pytest.skip(f"no ArduPilot Rover SITL on this machine ({e})")
+
+
+SHARED_PX4 = Path(__file__).resolve().parents[2] / "shared" / "px4"  # the PX4 tree shared beside this checkout
+
+
+def px4_or_skip() -> Path:
+    """The PX4 to test: $RETURNLINK_PX4 (which must work if set), else the shared tree (which must work if there);
+    with neither the test skips, saying so."""
+    from sim.px4.locate import ENV as PX4_ENV
+    from sim.px4.locate import PX4NotFound, check_px4_dir, find_px4
+
+    if os.environ.get(PX4_ENV):
+        try:
+            return find_px4()
+        except PX4NotFound as e:
+            pytest.fail(f"{PX4_ENV} is set but unusable: {e}")
+    if not SHARED_PX4.exists():
+        pytest.skip(f"no PX4: {PX4_ENV} is unset and {SHARED_PX4} is absent")
+    return check_px4_dir(SHARED_PX4)
 
 
 def short_scenario(tmp_path: Path, name: str = "tunnel", duration: float = 100.0) -> Path:

@@ -45,31 +45,19 @@ from sim.px4.hil import (
     to_local,
     wheels,
 )
-from sim.px4.locate import ENV, PX4NotFound, check_px4_dir, find_px4
+from sim.px4.locate import ENV, PX4NotFound, find_px4
 from sim.px4.process import GCS_UDP_PORT, PX4Process, claim_instance, lock_held, param_env
 from sim.robots import Rover
 from sim.world import World
+from tests.firmware_helpers import px4_or_skip
 
 pytestmark = [pytest.mark.interop, pytest.mark.firmware]
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED_PX4 = ROOT.parent / "shared" / "px4"
 ORIGIN = Origin()
 FIELD = earth_field(ORIGIN.lat, ORIGIN.lon)
 TRACK, WHEEL_MAX = 0.58, 2.2  # airframe 1069: RD_WHEEL_TRACK, RO_MAX_THR_SPEED
 STILL = RoverState(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-
-
-def px4_or_skip() -> Path:
-    """The PX4 to test: $RETURNLINK_PX4 (which must work if set), else the shared tree (which must work if there)."""
-    if os.environ.get(ENV):
-        try:
-            return find_px4()
-        except PX4NotFound as e:
-            pytest.fail(f"{ENV} is set but unusable: {e}")
-    if not SHARED_PX4.exists():
-        pytest.skip(f"no PX4: {ENV} is unset and {SHARED_PX4} is absent")
-    return check_px4_dir(SHARED_PX4)
 
 
 def roundtrip(msg):

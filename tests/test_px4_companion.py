@@ -26,9 +26,10 @@ from sim.px4.lockstep import HOLD, OFFBOARD, nav_state_name
 from sim.runner import Run, plant_for
 from sim.scenario import parse
 from tests.companion_rig import FakeAutopilot, Rig
+from tests.firmware_helpers import px4_or_skip
 from tests.px4_standin import INT32, PX4_DEFAULTS, REAL32, FakePX4
 from tests.test_companion_cli import FakeAutopilotServer
-from tests.test_px4_plant import ROOT, Started, px4_or_skip
+from tests.test_px4_plant import ROOT, Started
 from vehicle.companion import px4
 from vehicle.companion.autopilot import ArduPilotRules, PX4Rules
 from vehicle.companion.setup import PX4_NEEDS, check, differing, needs_for

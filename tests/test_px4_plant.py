@@ -23,29 +23,17 @@ from sim.cli import main
 from sim.plants.px4 import COM_OF_LOSS_T_MAX, PX4Plant, px4_params
 from sim.policies import PX4_FAILSAFE_POLICIES, check_policy, flies
 from sim.px4 import process
-from sim.px4.locate import ENV, PX4NotFound, check_px4_dir, find_px4
+from sim.px4.locate import ENV
 from sim.px4.lockstep import HOLD, OFFBOARD, RETURN, PX4Unusable, nav_state_name
 from sim.px4.process import PX4Error, lock_held
 from sim.runner import Run, plant_for
 from sim.scenario import parse
+from tests.firmware_helpers import px4_or_skip
 
 pytestmark = [pytest.mark.interop, pytest.mark.firmware]
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED_PX4 = ROOT.parent / "shared" / "px4"
 JAM_FROM, JAM_FOR = 12.0, 14.0  # s: the operator's radio hears nothing and is heard by nobody in this window
-
-
-def px4_or_skip() -> Path:
-    """The PX4 to test: $RETURNLINK_PX4 (which must work if set), else the shared tree (which must work if there)."""
-    if os.environ.get(ENV):
-        try:
-            return find_px4()
-        except PX4NotFound as e:
-            pytest.fail(f"{ENV} is set but unusable: {e}")
-    if not SHARED_PX4.exists():
-        pytest.skip(f"no PX4: {ENV} is unset and {SHARED_PX4} is absent")
-    return check_px4_dir(SHARED_PX4)
 
 
 def jammed_tunnel(duration: float = 50.0) -> str:

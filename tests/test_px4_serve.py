@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 from pymavlink import mavutil
 
-from tests.test_px4_plant import px4_or_skip
+from tests.firmware_helpers import px4_or_skip
 
 pytestmark = [pytest.mark.interop, pytest.mark.firmware]
 
