@@ -186,12 +186,19 @@ def _cmd_sim_run(args: argparse.Namespace) -> int:
     return 0 if m["passed"] else 1
 
 
+def _px4_unusable(px4: Path, e: Exception) -> SystemExit:
+    """Exit 2 for a PX4 that exits before it ever connects: no usable PX4, and how to give one."""
+    from sim.px4.locate import ENV
+
+    return _fail(f"{px4} is not a PX4 that runs here ({e}); give a working one with --px4 DIR or {ENV}=DIR (a ready "
+                 "one: ../shared/px4/, see its README.md)")
+
+
 def _run_px4(args: argparse.Namespace, sc, seed: int, policy: str, px4: Path, out: Path):
     """`sim run --vehicle px4rover`: the run, or the exit code when PX4 failed (2: the PX4 given exits before it
     ever connects, so it is no usable PX4; 1: it failed later, or never connected within its boot budget; 130:
     interrupted). PX4 is stopped in every case (the run's ``finally``)."""
     from sim.firmware.process import stop_on_terminate
-    from sim.px4.locate import ENV
     from sim.px4.lockstep import PX4Unusable
     from sim.px4.process import PX4Error
     from sim.runner import Run
@@ -202,8 +209,7 @@ def _run_px4(args: argparse.Namespace, sc, seed: int, policy: str, px4: Path, ou
             return Run(sc, "px4rover", seed, progress=not args.quiet, policy=policy, px4=px4,
                        log_path=out / "px4.log").run()
     except PX4Unusable as e:
-        raise _fail(f"{px4} is not a PX4 that runs here ({e}); give a working one with --px4 DIR or {ENV}=DIR "
-                    "(a ready one: ../shared/px4/, see its README.md)") from None
+        raise _px4_unusable(px4, e) from None
     except PX4Error as e:
         print(f"returnlink: PX4 failed: {e}", file=sys.stderr)
         return 1
@@ -503,10 +509,7 @@ def _cmd_sim_serve_autopilot(args: argparse.Namespace, sc, kind: str) -> int:
             server.run()
     except failure as e:
         if isinstance(e, unusable):
-            from sim.px4.locate import ENV
-
-            raise _fail(f"{binary} is not a PX4 that runs here ({e}); give a working one with --px4 DIR or "
-                        f"{ENV}=DIR (a ready one: ../shared/px4/, see its README.md)") from None
+            raise _px4_unusable(binary, e) from None
         print(f"returnlink: {who} failed: {e}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:

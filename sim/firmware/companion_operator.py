@@ -27,6 +27,30 @@ STICK_PERIOD = 0.1  # s: a held stick is streamed as the native operator's is (g
 HELD_STICK = 0x05C7  # SET_POSITION_TARGET type mask: velocity and yaw rate used (all zero)
 
 
+def take_control(op, t: float, start: str, then: str, ready: bool) -> None:
+    """Take control of the companion and upload the return plan, one step a tick, as the native operator does:
+    ``op.phase`` goes ``start`` -> acquiring (once ``ready``: the companion's status heard) -> uploading ->
+    ``then`` (the autopilot's own steps), back to ``start`` if the companion refuses the lease. Both companion
+    operators (ArduPilot's here, PX4's in ``sim.px4.companion_operator``) take control this way."""
+    gs = op.gs
+    if op.phase == start:
+        if ready:
+            op.pending = gs.acquire()
+            op.phase = "acquiring"
+    elif op.phase == "acquiring":
+        if op.pending is not None and op.pending.done:
+            if op.pending.ok:
+                op.log.append((t, f"in control, epoch {op.pending.param2}"))
+                op.transfer = gs.upload(op.plan) if op.plan else None
+                op.phase = "uploading"
+            else:
+                op.phase = start
+    elif op.transfer is None or op.transfer.done:
+        if op.transfer is not None:
+            op.log.append((t, f"plan upload {'accepted' if op.transfer.ok else 'failed'}"))
+        op.phase = then
+
+
 class CompanionOperator(FirmwareOperator):
     def __init__(self, route, resume_route, origin: tuple[float, float], plan: list[Item], attempts: int = 2,
                  sysid: int = GCS_SYSID, compid: int = GCS_COMPID, target_system: int = 1) -> None:
@@ -62,24 +86,8 @@ class CompanionOperator(FirmwareOperator):
 
     # ----- the lease steps --------------------------------------------------------------------------------------
     def _take_control(self, t: float) -> None:
-        """Take control of the companion and upload the return plan, one step a tick, as the native operator does."""
-        gs = self.gs
-        if self.phase == "connect":
-            if gs.vehicle.status is not None:
-                self.pending = gs.acquire()
-                self.phase = "acquiring"
-        elif self.phase == "acquiring":
-            if self.pending is not None and self.pending.done:
-                if self.pending.ok:
-                    self.log.append((t, f"in control, epoch {self.pending.param2}"))
-                    self.transfer = gs.upload(self.plan) if self.plan else None
-                    self.phase = "uploading"
-                else:
-                    self.phase = "connect"
-        elif self.transfer is None or self.transfer.done:
-            if self.transfer is not None:
-                self.log.append((t, f"plan upload {'accepted' if self.transfer.ok else 'failed'}"))
-            self.phase = "guided"  # the firmware operator's steps from here (the companion streams its position)
+        take_control(self, t, "connect", "guided",  # the firmware operator's steps next (the companion streams)
+                     self.gs.vehicle.status is not None)
 
     def _follow_lease(self, t: float, st) -> None:
         """Drive while the operator's lease is current; claim the fresh one after a return; else hands off."""

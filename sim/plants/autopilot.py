@@ -13,10 +13,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from link.radio import LinkState
+from link.radio import LinkState, subsystem_rng
 from sim.firmware import metrics
 from sim.jams import RADIO_EVENTS
-from sim.scenario import Event
+from sim.robots import make_robot
+from sim.scenario import Event, Scenario
 
 DT = 0.02  # the loop's tick (sim.plants.native.TICK_RATE): what moves around the autopilot moves at this pace
 
@@ -32,6 +33,33 @@ class AutopilotPlant:
     report = "sim.firmware.report"
     vehicle = None  # no returnlink aboard
     stale = 0  # no lease to audit against
+
+    kind: str
+    policies: tuple[str, ...]
+
+    def _set_scene(self, scenario: Scenario, kind: str, seed: int | None, policy: str, binary, what: str) -> None:
+        """What every autopilot's plant starts from: the vehicle, policy and binary checked (``what`` names the
+        binary in the error), the scenario's world and its pymunk rover at the start, the autopilot's local frame
+        (its EKF origin, the start) in the true frame, and an empty record."""
+        if kind != self.kind:
+            raise ValueError(f"vehicle {kind!r} is not {self.autopilot} ({self.kind!r})")
+        if policy not in self.policies:
+            raise ValueError(f"policy {policy!r} is not one of {', '.join(self.policies)}")
+        if binary is None:
+            raise ValueError(f"no {what} given")
+        self.scenario = sc = scenario
+        self.policy = policy
+        self.seed = sc.seed if seed is None else seed
+        self.world = sc.world()
+        x, y, yaw = sc.start
+        self.robot = make_robot("rover", self.world, x, y, yaw, subsystem_rng(self.seed, "robot"))
+        self.origin = (x, y)
+        self.frame_offset = self.origin
+        self.lnk_timeout = float(sc.params.get("LNK_TIMEOUT", 3.0))
+        self.rows: list[tuple] = []
+        self.heard: list[float] = []
+        self.operator = None  # made with the operator's station
+        self._op_name = sc.operator_station
 
     # ----- what differs ------------------------------------------------------------------------------------------
     def _physics_time(self) -> float:

@@ -28,12 +28,10 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from link.radio import subsystem_rng
 from sim.firmware.lockstep import MODE_NAMES, SKID_PARAMS, SPEEDUP, Lockstep
 from sim.firmware.operator import FirmwareOperator
 from sim.plants.autopilot import AutopilotPlant
 from sim.policies import COMPANION_POLICY, DEFAULT_FIRMWARE_POLICY, FAILSAFE_POLICIES, FIRMWARE_VEHICLE
-from sim.robots import make_robot
 from sim.scenario import Scenario, Station
 from vehicle.companion.setup import NEEDS
 
@@ -87,28 +85,10 @@ class FirmwarePlant(AutopilotPlant):
                  speedup: float = SPEEDUP) -> None:
         """``speedup``: the firmware's own pace; lockstep runs leave the pace to the bridge (``SPEEDUP``), a
         server in real time asks for 1."""
-        if kind != FIRMWARE_VEHICLE:
-            raise ValueError(f"vehicle {kind!r} is not the firmware ({FIRMWARE_VEHICLE!r})")
-        if policy not in self.policies:
-            raise ValueError(f"policy {policy!r} is not one of {', '.join(self.policies)}")
-        if firmware is None:
-            raise ValueError("no firmware binary given")
-        self.scenario = sc = scenario
-        self.policy = policy
-        self.seed = sc.seed if seed is None else seed
-        self.world = sc.world()
-        x, y, yaw = sc.start
-        self.robot = make_robot("rover", self.world, x, y, yaw, subsystem_rng(self.seed, "robot"))
-        self.origin = (x, y)
-        self.frame_offset = self.origin  # the autopilot's local frame (its EKF origin) in the true frame
-        self.lnk_timeout = float(sc.params.get("LNK_TIMEOUT", 3.0))
+        self._set_scene(scenario, kind, seed, policy, firmware, "firmware binary")
         self.link = Lockstep(self.world, self.robot, firmware,
                              firmware_params(policy, self.lnk_timeout, self.robot.max_speed,
                                              self.robot.max_accel), speedup, log_path)
-        self.rows: list[tuple] = []
-        self.heard: list[float] = []
-        self.operator: FirmwareOperator | None = None  # made with the operator's station
-        self._op_name = sc.operator_station
 
     def _make_operator(self, sc: Scenario) -> FirmwareOperator:
         """The scripted operator: a person flying the firmware in GUIDED from the scenario's station."""

@@ -30,12 +30,10 @@ import math
 from pathlib import Path
 
 from link.mission import Origin
-from link.radio import subsystem_rng
 from sim.plants.autopilot import AutopilotPlant
 from sim.policies import PX4_FAILSAFE_POLICIES, PX4_VEHICLE
 from sim.px4.lockstep import HOLD, NAV_STATES, OFFBOARD, RETURN, PX4Lockstep, nav_state_name
 from sim.px4.operator import RETURN_MODES, PX4Operator
-from sim.robots import make_robot
 from sim.scenario import Scenario, Station
 
 NAV_DLL_ACT = {"px4-hold": 1, "px4-return": 2}  # PX4's data-link loss action per policy: Hold, Return
@@ -93,22 +91,9 @@ class PX4Plant(AutopilotPlant):
                  accept_timeout_s: float | None = None) -> None:
         """``px4``: the PX4 directory (``sim.px4.locate.find_px4``); ``accept_timeout_s``: its boot budget, the
         wall seconds it gets to connect to the simulator link."""
-        if kind != PX4_VEHICLE:
-            raise ValueError(f"vehicle {kind!r} is not PX4 ({PX4_VEHICLE!r})")
-        if policy not in self.policies:
-            raise ValueError(f"policy {policy!r} is not one of {', '.join(self.policies)}")
-        if px4 is None:
-            raise ValueError("no PX4 directory given")
-        self.scenario = sc = scenario
-        self.policy = policy
-        self.seed = sc.seed if seed is None else seed
-        self.world = sc.world()
-        x, y, yaw = sc.start
-        self.robot = make_robot("rover", self.world, x, y, yaw, subsystem_rng(self.seed, "robot"))
-        self.origin = (x, y)
-        self.frame_offset = self.origin  # PX4's local frame (its EKF2 origin, where it got its first fix)
+        self._set_scene(scenario, kind, seed, policy, px4, "PX4 directory")
+        sc = scenario
         self.geo = Origin()  # the scenario frame's (0, 0) on the globe: the bridge's GPS origin
-        self.lnk_timeout = float(sc.params.get("LNK_TIMEOUT", 3.0))
         speeds = [p[2] for p in (*sc.route, *sc.resume_route)]
         speed_limit = min(self.robot.max_speed, max(speeds, default=self.robot.max_speed))
         self.params = self._px4_params(policy, self.lnk_timeout, speed_limit)
@@ -116,10 +101,6 @@ class PX4Plant(AutopilotPlant):
         self.lnk_timeout = float(self.params["COM_DL_LOSS_T"])
         options = {} if accept_timeout_s is None else {"accept_timeout_s": accept_timeout_s}
         self.link = PX4Lockstep(self.world, self.robot, px4, self.params, self.geo, self.seed, log_path, **options)
-        self.rows: list[tuple] = []
-        self.heard: list[float] = []
-        self.operator: PX4Operator | None = None  # made with the operator's station
-        self._op_name = sc.operator_station
 
     @staticmethod
     def _px4_params(policy: str, lnk_timeout: float, speed_limit: float) -> dict[str, float]:

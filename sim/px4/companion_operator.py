@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from gcs.station import GroundStation, mav
 from link.mission import Item, Origin
+from sim.firmware.companion_operator import take_control
 from sim.firmware.operator import GCS_COMPID, GCS_SYSID, RETRY_S
 from sim.px4.lockstep import HOLD, OFFBOARD
 from sim.px4.operator import PX4Operator
@@ -75,24 +76,9 @@ class PX4CompanionOperator(PX4Operator):
 
     # ----- the lease steps --------------------------------------------------------------------------------------
     def _take_control(self, t: float) -> None:
-        """Take control of the companion and upload the return plan, one step a tick, as the native operator does."""
         gs = self.gs
-        if self.phase == "lease":
-            if gs.target and gs.vehicle.status is not None:
-                self.pending = gs.acquire()
-                self.phase = "acquiring"
-        elif self.phase == "acquiring":
-            if self.pending is not None and self.pending.done:
-                if self.pending.ok:
-                    self.log.append((t, f"in control, epoch {self.pending.param2}"))
-                    self.transfer = gs.upload(self.plan) if self.plan else None
-                    self.phase = "uploading"
-                else:
-                    self.phase = "lease"
-        elif self.transfer is None or self.transfer.done:
-            if self.transfer is not None:
-                self.log.append((t, f"plan upload {'accepted' if self.transfer.ok else 'failed'}"))
-            self.phase = "connect"  # the PX4 operator's steps from here
+        take_control(self, t, "lease", "connect",  # the PX4 operator's steps next
+                     bool(gs.target) and gs.vehicle.status is not None)
 
     def _follow_lease(self, t: float, st) -> None:
         """Drive while the operator's lease is current; claim the fresh one after a return; else hands off."""
