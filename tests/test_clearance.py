@@ -22,7 +22,7 @@ from vehicle.clearance import (
     shortcut,
 )
 from vehicle.io import Scan
-from vehicle.returning import Target, plan_route
+from vehicle.returning import Target, heard_stretch, plan_route
 from vehicle.trail import Crumb, Trail
 
 BEARINGS = np.arange(90) * (2 * math.pi / 90)  # the simulated sensor's
@@ -156,6 +156,42 @@ def test_an_open_rooms_corner_is_cut_and_the_cut_is_shorter_and_keeps_the_ends()
     assert len(cut_sp) == len(cut) and np.all(cut_sp == 0.8)
     # no clearance asked, no range sensor: the crumbs as they were
     assert shortcut(pts, sp, free, 0.0)[0] is pts and shortcut(pts, sp, None, 0.9)[0] is pts
+
+
+def _l_trail(heard_to: float) -> Trail:
+    """The L of ``_l_route`` driven as crumbs every 2 cm, north from (2, 2) to (8, 2) then east to (8, 8), the
+    link heard up to ``heard_to`` metres east along the second leg and lost beyond."""
+    trail = Trail()
+    pts = [(2.0 + 0.02 * k, 2.0) for k in range(300)] + [(8.0, 2.0 + 0.02 * k) for k in range(301)]
+    for k, (x, y) in enumerate(pts):
+        trail.add(Crumb(x, y, 0.02 * k, 0.1, x < 8.0 or y <= 2.0 + heard_to, speed=0.8))
+    return trail
+
+
+def test_a_return_drives_the_stretch_the_link_was_last_heard_on_as_driven_and_cuts_corners_before_it():
+    """After a loss the route may cut corners only up to where the last stretch driven with the link ended: the
+    link comes back first along that stretch, and a cut past it leaves the known way to the link for an unknown
+    one (gen:mine rover seed 124: 6.80 s to link against 5.40 s). Here the link was heard along the whole north
+    leg and 1 m into the east one: the route cuts nothing past (8, 3) and so turns at the corner (8, 2) where the
+    crumbs turned, though the room is open and seen free; without a loss (an operator's RTL) it cuts the corner."""
+    world = _room()
+    trail = _l_trail(1.0)
+    free = _scanned(world, [(x, y) for x in (2.0, 4.0, 6.0, 8.0) for y in (2.0, 4.0, 6.0, 8.0)])
+    lost = plan_route(trail, (8.0, 8.0), Target.LINK, 100.0, link_lost=True, overshoot=4.0, free=free,
+                      clearance=0.9)
+    assert np.min(np.hypot(*(lost.points - (8.0, 2.0)).T)) < 1e-6  # the corner crumb is on the route
+    assert np.allclose(lost.points[-1], (5.0, 2.0), atol=0.05)  # 4 m on from the last heard crumb (8, 3)
+    rtl = plan_route(trail, (8.0, 8.0), Target.ORIGIN, 100.0, link_lost=False, free=free, clearance=0.9)
+    assert np.min(np.hypot(*(rtl.points - (8.0, 2.0)).T)) > 0.5  # nothing was lost: the corner is cut
+
+
+def test_a_lone_packet_heard_in_a_dead_place_is_not_the_stretch_the_link_held_on():
+    """``heard_stretch``: the newest link-good crumb whose predecessor was link-good too, at or before the goal."""
+    assert heard_stretch(np.array([True, True, True, False, True, False, False]), 4) == 2
+    assert heard_stretch(np.array([True, True, True, False, True, True, False]), 5) == 5
+    assert heard_stretch(np.array([False, True, False, True, False]), 3) == -1
+    assert heard_stretch(np.array([True, True, True]), 1) == 1  # never past the goal
+    assert heard_stretch(np.array([], dtype=bool), 0) == -1
 
 
 def test_a_wall_inside_the_corner_is_not_cut_through():
