@@ -17,14 +17,15 @@ from pathlib import Path
 import numpy as np
 
 from link.storage import StoredFileError
-from sim.campaign.store import read_rows, rest_from_loss, time_to_link
+from sim.campaign.store import percentile, read_rows, rest_from_loss, time_to_link
 
 REST_RATIO = 0.25  # returnlink's mean rest distance at most this share of SmartRTL's
 WEAK_CYCLES_MEAN, WEAK_CYCLES_MAX, WEAK_REGAINED = 1.5, 3, 0.99
 
 
 def _p95(values: list[float]) -> float:
-    return float(np.percentile(values, 95, method="inverted_cdf")) if values else float("nan")
+    p = percentile(values, 95)
+    return float("nan") if p is None else p
 
 
 def _groups(rows: list[dict], pooled: bool) -> dict[tuple[str, str], dict[str, list[dict]]]:

@@ -160,8 +160,9 @@ def rest_from_loss(row: dict) -> float | None:
     return math.dist(a[:2], b[:2])
 
 
-def _pct(values: list[float], q: float) -> float | None:
-    # the empirical quantile (no interpolation), so a share of never-regained trials shows as inf, not nan
+def percentile(values: list[float], q: float) -> float | None:
+    """The empirical quantile (no interpolation: a trial's own value), so a share of never-regained trials shows
+    as inf, not nan; every table of a sweep uses it (None for no values)."""
     return float(np.percentile(values, q, method="inverted_cdf")) if values else None
 
 
@@ -192,10 +193,10 @@ def summary(rows: Iterable[dict]) -> list[dict]:
             "errors": sum(r["status"] == "error" for r in rs),
             "pass_rate": sum(r["status"] == "ok" for r in ran) / len(ran) if ran else None,
             "link_regained_rate": sum(r.get("link_regained_s") is not None for r in ran) / len(ran) if ran else None,
-            "time_to_link_p50_s": _pct(ttl, 50), "time_to_link_p90_s": _pct(ttl, 90),
-            "time_to_link_p99_s": _pct(ttl, 99),
+            "time_to_link_p50_s": percentile(ttl, 50), "time_to_link_p90_s": percentile(ttl, 90),
+            "time_to_link_p99_s": percentile(ttl, 99),
             "distance_back_m_mean": _mean([r["distance_back_m"] for r in ran if r.get("distance_back_m") is not None]),
-            "rest_from_loss_m_mean": _mean(rest), "rest_from_loss_m_p90": _pct(rest, 90),
+            "rest_from_loss_m_mean": _mean(rest), "rest_from_loss_m_p90": percentile(rest, 90),
             "collisions_during_return": sum(coll) if coll else None,
             "link_cycles_mean": _mean(cycles), "link_cycles_max": max(cycles) if cycles else None,
             "relapses_mean": _mean(relapsed), "relapses_max": max(relapsed) if relapsed else None,
