@@ -3,7 +3,9 @@ and ``generated_firmware.toml`` (run into the same directory): per family and po
 link, how many of those the return itself brought back, the P95 time to link pooled over both robots and for each,
 the mean rest distance from the loss, and wall contacts while a return held the robot.
 
-    python benchmarks/generated_evidence.py OUT_DIR
+    python benchmarks/generated_evidence.py OUT_DIR [--seeds FIRST-LAST]
+
+``--seeds`` keeps the trials of those seeds only (the held-out ones, say).
 
 Figures only, read from ``trials.parquet``; the last lines say, per family, whether returnlink's pooled P95 is at
 most each baseline's (the issue's target), and nothing is asserted. The P95 is the campaign summary's
@@ -59,8 +61,21 @@ def family_table(rows: list[dict], family: str) -> tuple[str, dict[str, float]]:
     return "\n".join(lines), pooled
 
 
+def _seeds(text: str) -> range | None:
+    first, _, last = text.partition("-")
+    if not (first.isdigit() and last.isdigit()) or int(first) > int(last):
+        return None
+    return range(int(first), int(last) + 1)
+
+
 def main(argv: list[str]) -> int:
-    if len(argv) != 1:
+    seeds = None
+    if len(argv) == 3 and argv[1] == "--seeds":
+        seeds = _seeds(argv[2])
+        if seeds is None:
+            print(f"generated_evidence: --seeds wants FIRST-LAST, e.g. 141-180, got {argv[2]!r}", file=sys.stderr)
+            return 2
+    elif len(argv) != 1:
         print(__doc__, file=sys.stderr)
         return 2
     try:
@@ -68,8 +83,11 @@ def main(argv: list[str]) -> int:
     except StoredFileError as e:
         print(f"generated_evidence: {e}", file=sys.stderr)
         return 2
+    if seeds is not None:
+        rows = [r for r in rows if r.get("seed") in seeds]
     errors = sum(1 for r in rows if r.get("status") == "error")
-    print(f"## {argv[0]}: {len(rows)} trials, {errors} errors")
+    told = f" (seeds {seeds.start}-{seeds.stop - 1})" if seeds is not None else ""
+    print(f"## {argv[0]}{told}: {len(rows)} trials, {errors} errors")
     verdicts = []
     for family in sorted({r["scenario"] for r in rows}):
         table, pooled = family_table(rows, family)
