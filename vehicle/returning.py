@@ -87,8 +87,11 @@ class Way:
         sp = np.concatenate([[self.speeds[k], self.speeds[k]], self.speeds[k + 1:]])
         keep = np.ones(len(out), dtype=bool)
         keep[1:] = np.hypot(*np.diff(out, axis=0).T) > 1e-9
-        return Way(out[keep], sp[keep], max(0.0, self.goal - best_s) + (best_d if self.goal > best_s else 0.0),
-                   max(0.0, self.heard - best_s) + (best_d if self.heard > best_s else 0.0))
+
+        def still_ahead(s: float) -> float:  # a distance along the old way, from the robot on the new one
+            return max(0.0, s - best_s) + (best_d if s > best_s else 0.0)
+
+        return Way(out[keep], sp[keep], still_ahead(self.goal), still_ahead(self.heard))
 
 
 def _cut(pts: np.ndarray, at: float) -> tuple[np.ndarray, np.ndarray, int]:
@@ -140,10 +143,9 @@ def heard_stretch(link_good: np.ndarray, goal: int) -> int:
     link-good crumb whose predecessor was link-good too (-1: none). A lone link-good crumb among lost ones is a
     moment's packet in a dead place, not a way the link holds along (building rover seed 5: one packet heard 4 m
     inside the far room, where the link came back only at the door)."""
-    for i in range(min(goal, len(link_good) - 1), 0, -1):
-        if link_good[i] and link_good[i - 1]:
-            return i
-    return -1
+    good = np.asarray(link_good[: goal + 1], dtype=bool)
+    both = np.flatnonzero(good[1:] & good[:-1])
+    return int(both[-1]) + 1 if len(both) else -1
 
 
 def _heard_along(pts: np.ndarray, idx: np.ndarray, crumb: int) -> float:
