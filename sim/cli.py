@@ -155,26 +155,12 @@ def _cmd_sim_run(args: argparse.Namespace) -> int:
           f"{sc.duration:g} simulated s", file=sys.stderr)
     from sim.runner import Run
 
-    if px4 is not None:
-        run = _run_px4(args, sc, seed, policy, px4, out)
-        if isinstance(run, int):
-            return run
-    elif firmware is None:
+    if px4 is None and firmware is None:
         run = Run(sc, kind, seed, progress=not args.quiet, policy=policy).run()
     else:
-        from sim.firmware.process import FirmwareError, stop_on_terminate
-
-        print(f"returnlink: firmware {firmware}", file=sys.stderr)
-        try:
-            with stop_on_terminate():
-                run = Run(sc, kind, seed, progress=not args.quiet, policy=policy, firmware=firmware,
-                          log_path=out / "firmware.log").run()
-        except FirmwareError as e:
-            print(f"returnlink: the firmware failed: {e}", file=sys.stderr)
-            return 1
-        except KeyboardInterrupt:
-            print("returnlink: interrupted; the firmware was stopped", file=sys.stderr)
-            return 130
+        run = _run_autopilot(args, sc, kind, seed, policy, out, px4 or firmware, px4 is not None)
+        if isinstance(run, int):
+            return run
     m = run.metrics = outputs.compute(run)
     try:
         paths = outputs.write(run, out, plots=not args.no_plots)
@@ -194,27 +180,30 @@ def _px4_unusable(px4: Path, e: Exception) -> SystemExit:
                  "one: ../shared/px4/, see its README.md)")
 
 
-def _run_px4(args: argparse.Namespace, sc, seed: int, policy: str, px4: Path, out: Path):
-    """`sim run --vehicle px4rover`: the run, or the exit code when PX4 failed (2: the PX4 given exits before it
-    ever connects, so it is no usable PX4; 1: it failed later, or never connected within its boot budget; 130:
-    interrupted). PX4 is stopped in every case (the run's ``finally``)."""
-    from sim.firmware.process import stop_on_terminate
+def _run_autopilot(args: argparse.Namespace, sc, kind: str, seed: int, policy: str, out: Path, binary: Path,
+                   px4: bool):
+    """`sim run` with a real autopilot (ArduPilot's firmware, or PX4 with ``px4``): the run, or the exit code when
+    it failed (2: the PX4 given exits before it ever connects, so it is no usable PX4; 1: it failed later, or never
+    connected within its boot budget; 130: interrupted). The autopilot is stopped in every case (the run's
+    ``finally``)."""
+    from sim.firmware.process import FirmwareError, stop_on_terminate
     from sim.px4.lockstep import PX4Unusable
     from sim.px4.process import PX4Error
     from sim.runner import Run
 
-    print(f"returnlink: PX4 {px4}", file=sys.stderr)
+    who, option = ("PX4", "px4") if px4 else ("the firmware", "firmware")
+    print(f"returnlink: {'PX4' if px4 else 'firmware'} {binary}", file=sys.stderr)
     try:
         with stop_on_terminate():
-            return Run(sc, "px4rover", seed, progress=not args.quiet, policy=policy, px4=px4,
-                       log_path=out / "px4.log").run()
+            return Run(sc, kind, seed, progress=not args.quiet, policy=policy, log_path=out / f"{option}.log",
+                       **{option: binary}).run()
     except PX4Unusable as e:
-        raise _px4_unusable(px4, e) from None
-    except PX4Error as e:
-        print(f"returnlink: PX4 failed: {e}", file=sys.stderr)
+        raise _px4_unusable(binary, e) from None
+    except (FirmwareError, PX4Error) as e:
+        print(f"returnlink: {who} failed: {e}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print("returnlink: interrupted; PX4 was stopped", file=sys.stderr)
+        print(f"returnlink: interrupted; {who} was stopped", file=sys.stderr)
         return 130
 
 

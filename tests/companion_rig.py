@@ -74,9 +74,16 @@ class FakeAutopilot:
         self._send(apm.MAVLink_command_ack_message(m.command, result, 0, 0, m.get_srcSystem(),
                                                    m.get_srcComponent()))
 
+    def _drives(self, t: float) -> bool:
+        """Whether it follows its last target now: GUIDED, armed, a target within 3 s."""
+        return self.mode == GUIDED and t - self.target_at <= 3.0 and self.armed
+
+    def _estimator_report(self, ms: int):
+        return apm.MAVLink_ekf_status_report_message(0x1F if self.ekf_ok else 0x03, 0, 0, 0, 0, 0, 0)
+
     def step(self, t: float, dt: float) -> list[bytes]:
         """Physics and reports for ``dt``; the frames it sends now."""
-        if self.mode != GUIDED or t - self.target_at > 3.0 or not self.armed:
+        if not self._drives(t):
             self.speed = self.yaw_rate = 0.0
         self.yaw += self.yaw_rate * dt
         self.x += self.speed * math.cos(self.yaw) * dt
@@ -94,7 +101,7 @@ class FakeAutopilot:
             vx, vy = self.speed * math.cos(self.yaw), self.speed * math.sin(self.yaw)
             self._send(apm.MAVLink_local_position_ned_message(ms, self.x, self.y, 0.0, vx, vy, 0.0))
             self._send(apm.MAVLink_attitude_message(ms, 0.0, 0.0, self.yaw, 0.0, 0.0, self.yaw_rate))
-            self._send(apm.MAVLink_ekf_status_report_message(0x1F if self.ekf_ok else 0x03, 0, 0, 0, 0, 0, 0))
+            self._send(self._estimator_report(ms))
         out, self.out = self.out, []
         return out
 

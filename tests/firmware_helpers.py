@@ -48,3 +48,12 @@ def short_scenario(tmp_path: Path, name: str = "tunnel", duration: float = 100.0
     path = tmp_path / f"{name}-short.toml"
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def group_gone(pgid: int) -> bool:
+    """Whether no process of group ``pgid`` is left (the PX4 a test started, stopped by its own process group)."""
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return True
+    return False

@@ -101,29 +101,12 @@ class FakePX4(FakeAutopilot):
                 self._send(apm.MAVLink_param_value_message(name.encode(), _bits(value, ptype), ptype,
                                                            len(self.typed), 0))
 
-    def step(self, t: float, dt: float) -> list[bytes]:
-        """PX4's Offboard loss, then the stand-in's physics and reports."""
+    def _drives(self, t: float) -> bool:
+        """PX4's Offboard loss first (Hold, or Position with COM_OBL_RC_ACT other than 5); then whether it follows
+        its setpoint: Offboard and armed."""
         if self.mode == OFFBOARD and t - self.setpoint_at > self.param("COM_OF_LOSS_T"):
             self.mode = HOLD if self.param("COM_OBL_RC_ACT") == 5 else POSCTL
-        if self.mode != OFFBOARD or not self.armed:
-            self.speed = self.yaw_rate = 0.0
-        self.yaw += self.yaw_rate * dt
-        self.x += self.speed * math.cos(self.yaw) * dt
-        self.y += self.speed * math.sin(self.yaw) * dt
-        if self.silent:
-            self.out.clear()
-            return []
-        if t >= self.next_heartbeat:
-            self.next_heartbeat = t + 1.0
-            base = apm.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (apm.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0)
-            self._send(apm.MAVLink_heartbeat_message(self.mav_type, self.autopilot, base, self.mode, 4, 3))
-        if t >= self.next_report:
-            self.next_report = t + 0.1
-            ms = int(t * 1000)
-            vx, vy = self.speed * math.cos(self.yaw), self.speed * math.sin(self.yaw)
-            self._send(apm.MAVLink_local_position_ned_message(ms, self.x, self.y, 0.0, vx, vy, 0.0))
-            self._send(apm.MAVLink_attitude_message(ms, 0.0, 0.0, self.yaw, 0.0, 0.0, self.yaw_rate))
-            flags = 0x1F if self.ekf_ok else 0x03
-            self._send(apm.MAVLink_estimator_status_message(ms * 1000, flags, 0, 0, 0, 0, 0, 0, 0, 0))
-        out, self.out = self.out, []
-        return out
+        return self.mode == OFFBOARD and self.armed
+
+    def _estimator_report(self, ms: int):
+        return apm.MAVLink_estimator_status_message(ms * 1000, 0x1F if self.ekf_ok else 0x03, 0, 0, 0, 0, 0, 0, 0, 0)

@@ -49,7 +49,7 @@ from sim.px4.locate import ENV, PX4NotFound, find_px4
 from sim.px4.process import GCS_UDP_PORT, PX4Process, claim_instance, lock_held, param_env
 from sim.robots import Rover
 from sim.world import World
-from tests.firmware_helpers import px4_or_skip
+from tests.firmware_helpers import group_gone, px4_or_skip
 
 pytestmark = [pytest.mark.interop, pytest.mark.firmware]
 
@@ -343,14 +343,6 @@ class Station:
 
 PX4_OFFBOARD = 6  # PX4's main mode number
 DT = 0.004  # 250 Hz: the IMU rate PX4's SITL expects (IMU_INTEG_RATE)
-
-
-def group_gone(pgid: int) -> bool:
-    try:
-        os.killpg(pgid, 0)
-    except ProcessLookupError:
-        return True
-    return False
 
 
 def test_stop_ends_a_px4_that_waits_for_its_simulator():

@@ -12,7 +12,6 @@ The tests of the command line's refusals and of the boot budget use stand-in PX4
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import pytest
@@ -28,7 +27,7 @@ from sim.px4.lockstep import HOLD, OFFBOARD, RETURN, PX4Unusable, nav_state_name
 from sim.px4.process import PX4Error, lock_held
 from sim.runner import Run, plant_for
 from sim.scenario import parse
-from tests.firmware_helpers import px4_or_skip
+from tests.firmware_helpers import group_gone, px4_or_skip
 
 pytestmark = [pytest.mark.interop, pytest.mark.firmware]
 
@@ -53,14 +52,6 @@ def fake_px4(root: Path, script: str) -> Path:
     (root / "etc" / "init.d-posix" / "rcS").write_text("")
     (root / "etc" / "init.d-posix" / "airframes" / "1069_hil_rover_differential").write_text("")
     return root
-
-
-def group_gone(pgid: int) -> bool:
-    try:
-        os.killpg(pgid, 0)
-    except ProcessLookupError:
-        return True
-    return False
 
 
 class Started:

@@ -27,31 +27,45 @@ STICK_PERIOD = 0.1  # s: a held stick is streamed as the native operator's is (g
 HELD_STICK = 0x05C7  # SET_POSITION_TARGET type mask: velocity and yaw rate used (all zero)
 
 
-def take_control(op, t: float, start: str, then: str, ready: bool) -> None:
-    """Take control of the companion and upload the return plan, one step a tick, as the native operator does:
-    ``op.phase`` goes ``start`` -> acquiring (once ``ready``: the companion's status heard) -> uploading ->
-    ``then`` (the autopilot's own steps), back to ``start`` if the companion refuses the lease. Both companion
-    operators (ArduPilot's here, PX4's in ``sim.px4.companion_operator``) take control this way."""
-    gs = op.gs
-    if op.phase == start:
-        if ready:
-            op.pending = gs.acquire()
-            op.phase = "acquiring"
-    elif op.phase == "acquiring":
-        if op.pending is not None and op.pending.done:
-            if op.pending.ok:
-                op.log.append((t, f"in control, epoch {op.pending.param2}"))
-                op.transfer = gs.upload(op.plan) if op.plan else None
-                op.phase = "uploading"
-            else:
-                op.phase = start
-    elif op.transfer is None or op.transfer.done:
-        if op.transfer is not None:
-            op.log.append((t, f"plan upload {'accepted' if op.transfer.ok else 'failed'}"))
-        op.phase = then
+class ThroughCompanion:
+    """What both companion operators (ArduPilot's here, PX4's in ``sim.px4.companion_operator``) do alike, before the
+    autopilot operator's class among their bases: everything leaves through the ground station ``gs`` (one MAVLink
+    encoder: one sequence of packet numbers for the companion's link watch), a scripted RTL goes to the companion,
+    and control is taken the native operator's way."""
+
+    def _send(self, msg) -> None:
+        self.gs.mav.send(msg)
+
+    def request_rtl(self, t: float) -> None:
+        """A scripted RTL (the scenario's ``rtl`` event): to the companion, where it expires the operator's lease
+        and the return plan takes over, as on the native vehicle."""
+        self.gs.rtl()
+        self.log.append((t, "rtl requested"))
+
+    def take_control(self, t: float, start: str, then: str, ready: bool) -> None:
+        """Take control of the companion and upload the return plan, one step a tick: ``phase`` goes ``start`` ->
+        acquiring (once ``ready``: the companion's status heard) -> uploading -> ``then`` (the autopilot's own
+        steps), back to ``start`` if the companion refuses the lease."""
+        gs = self.gs
+        if self.phase == start:
+            if ready:
+                self.pending = gs.acquire()
+                self.phase = "acquiring"
+        elif self.phase == "acquiring":
+            if self.pending is not None and self.pending.done:
+                if self.pending.ok:
+                    self.log.append((t, f"in control, epoch {self.pending.param2}"))
+                    self.transfer = gs.upload(self.plan) if self.plan else None
+                    self.phase = "uploading"
+                else:
+                    self.phase = start
+        elif self.transfer is None or self.transfer.done:
+            if self.transfer is not None:
+                self.log.append((t, f"plan upload {'accepted' if self.transfer.ok else 'failed'}"))
+            self.phase = then
 
 
-class CompanionOperator(FirmwareOperator):
+class CompanionOperator(ThroughCompanion, FirmwareOperator):
     def __init__(self, route, resume_route, origin: tuple[float, float], plan: list[Item], attempts: int = 2,
                  sysid: int = GCS_SYSID, compid: int = GCS_COMPID, target_system: int = 1) -> None:
         super().__init__(route, resume_route, origin, attempts, sysid, compid, target_system)
@@ -67,15 +81,6 @@ class CompanionOperator(FirmwareOperator):
         super().feed(data, t)
         self.gs.feed(data, t)
 
-    def _send(self, msg) -> None:
-        self.gs.mav.send(msg)
-
-    def request_rtl(self, t: float) -> None:
-        """A scripted RTL (the scenario's ``rtl`` event): to the companion, where it expires the operator's lease
-        and the return plan takes over, as on the native vehicle."""
-        self.gs.rtl()
-        self.log.append((t, "rtl requested"))
-
     def tick(self, t: float) -> list[bytes]:
         st = self.gs.vehicle.status
         if self.phase in _TAKING_CONTROL:
@@ -86,7 +91,7 @@ class CompanionOperator(FirmwareOperator):
 
     # ----- the lease steps --------------------------------------------------------------------------------------
     def _take_control(self, t: float) -> None:
-        take_control(self, t, "connect", "guided",  # the firmware operator's steps next (the companion streams)
+        self.take_control(t, "connect", "guided",  # the firmware operator's steps next (the companion streams)
                      self.gs.vehicle.status is not None)
 
     def _follow_lease(self, t: float, st) -> None:

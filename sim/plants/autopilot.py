@@ -91,6 +91,11 @@ class AutopilotPlant:
         return f"t={ev.t:g} s: event {ev.action!r} does not apply to {self.autopilot}"
 
     # ----- time ----------------------------------------------------------------------------------------------
+    def start(self) -> None:
+        """Start the autopilot's process and boot it to its first estimate on the simulator's clock."""
+        self.link.start()
+        self.link.boot()
+
     def pace(self, tick: Callable[[float], bool], duration: float) -> None:
         """The physics' time, step by step, with a tick each time it crosses a multiple of DT after the boot
         (scenario time 0)."""

@@ -105,10 +105,6 @@ class FirmwarePlant(AutopilotPlant):
         return self.operator, None
 
     # ----- time ----------------------------------------------------------------------------------------------
-    def start(self) -> None:
-        self.link.start()
-        self.link.boot()
-
     def _physics_time(self) -> float:
         return self.link.t_fw
 

@@ -117,10 +117,6 @@ class PX4Plant(AutopilotPlant):
         return self.operator, None
 
     # ----- time ----------------------------------------------------------------------------------------------
-    def start(self) -> None:
-        self.link.start()
-        self.link.boot()
-
     def _physics_time(self) -> float:
         return self.link.t_sim
 

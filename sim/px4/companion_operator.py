@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from gcs.station import GroundStation, mav
 from link.mission import Item, Origin
-from sim.firmware.companion_operator import take_control
+from sim.firmware.companion_operator import ThroughCompanion
 from sim.firmware.operator import GCS_COMPID, GCS_SYSID, RETRY_S
 from sim.px4.lockstep import HOLD, OFFBOARD
 from sim.px4.operator import PX4Operator
@@ -33,7 +33,7 @@ _DRIVING = frozenset(("driving", "resuming"))
 HOLD_WAIT_S = 3.0  # s of a Hold in the operator's own drive before it switches back to Offboard itself
 
 
-class PX4CompanionOperator(PX4Operator):
+class PX4CompanionOperator(ThroughCompanion, PX4Operator):
     """The PX4 operator behind returnlink companion (see the module docstring)."""
 
     def __init__(self, route, resume_route, geo: Origin, plan: list[Item], attempts: int = 2,
@@ -56,15 +56,6 @@ class PX4CompanionOperator(PX4Operator):
             self.gs.target = self.target
         self.gs.feed(data, t)
 
-    def _send(self, msg) -> None:
-        self.gs.mav.send(msg)
-
-    def request_rtl(self, t: float) -> None:
-        """A scripted RTL: to the companion, where it expires the operator's lease and the return plan takes
-        over, as on the native vehicle."""
-        self.gs.rtl()
-        self.log.append((t, "rtl requested"))
-
     def tick(self, t: float) -> list[bytes]:
         st = self.gs.vehicle.status
         if self.phase in _TAKING_CONTROL:
@@ -77,7 +68,7 @@ class PX4CompanionOperator(PX4Operator):
     # ----- the lease steps --------------------------------------------------------------------------------------
     def _take_control(self, t: float) -> None:
         gs = self.gs
-        take_control(self, t, "lease", "connect",  # the PX4 operator's steps next
+        self.take_control(t, "lease", "connect",  # the PX4 operator's steps next
                      bool(gs.target) and gs.vehicle.status is not None)
 
     def _follow_lease(self, t: float, st) -> None:
