@@ -165,3 +165,25 @@ def test_blocks_refuse_an_item_the_service_could_not_run():
                 PlanItem(NAV_LOITER_TIME, float("nan")), PlanItem(NAV_WAYPOINT, x=float("inf"))):
         with pytest.raises(ValueError, match="item 0: "):
             blocks_from_items([bad], params)
+
+
+def test_a_block_drives_its_route_from_the_tick_it_plans_it():
+    """``start`` with the robot's heading, and an item begun mid-block, command the route's first step in the
+    tick the route is planned: the tick a block waited cost it 20 ms against a baseline that drives at once.
+    Without a heading (a caller that has none) the tick is a stop, as before."""
+    s, rig = outbound()
+    params = Params()
+    p = rig.estimator.pose
+    block = blocks_from_items([PlanItem(NAV_RETURN_TO_LINK, 50)], params)[0]
+    res = start(block, p.x, p.y, rig.t, rig.trail, params, True, 1.2, yaw=p.yaw)
+    assert res.replanned and res.finished is None
+    assert res.speed != 0.0, "a planned route is driven from its first tick"
+    assert res.state.progress >= 0.0 and res.state.best_remaining < math.inf
+    still = start(block, p.x, p.y, rig.t, rig.trail, params, True, 1.2)
+    assert still.replanned and (still.speed, still.yaw_rate) == (0.0, 0.0)
+    # an item after a loiter: the tick the loiter ends plans the route and drives it
+    block = blocks_from_items([PlanItem(NAV_LOITER_TIME, 0.1), PlanItem(NAV_RETURN_TO_LINK, 50)], params)[0]
+    res = start(block, p.x, p.y, rig.t, rig.trail, params, True, 1.2, yaw=p.yaw)
+    assert (res.speed, res.yaw_rate) == (0.0, 0.0)  # loitering
+    res = step(res.state, p.x, p.y, p.yaw, rig.t + 0.2, rig.trail, params, True, 1.2)
+    assert res.replanned and res.state.item == 1 and res.speed != 0.0

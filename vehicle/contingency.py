@@ -130,7 +130,7 @@ class ReturnDriver:
                 if self.way is not None and self.way_chain == cur.chain:
                     resume = self.way.resumed((x, y), self.way.length)
                 step = start_block(cur.block, x, y, t, trail, v.params, link_lost, outbound_speed, linkmap, resume,
-                                   free=free)
+                                   free=free, yaw=yaw, regaining=book.link.regaining(t))
             else:
                 step = step_block(self.service, x, y, yaw, t, trail, v.params, link_lost, outbound_speed,
                                   slipping=estimator.slipping, linkmap=linkmap, regaining=book.link.regaining(t),
