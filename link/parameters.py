@@ -57,6 +57,9 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("LNK_HOLD_S", 1.0, 0.0, 10.0, "s",
               "companion: the owner driving the autopilot with setpoints in GUIDED silent this long (and longer "
               "than its longest gap between packets of the last 5 s) -> the drive is stopped (0 = never)"),
+    ParamSpec("RTL_BODY_R", 0.0, 0.0, 5.0, "m",
+              "the robot's footprint radius: a return keeps its body a few cm off what the range sensor sees "
+              "now, whatever the estimate's error (0 = unknown, not kept)"),
 )
 BY_NAME = {s.name: s for s in SPECS}
 

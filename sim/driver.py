@@ -20,7 +20,7 @@ from sim.world import World
 from vehicle.app import Contingency, Vehicle
 from vehicle.endpoint import Endpoint
 from vehicle.io import Readings
-from vehicle.params import load_defaults
+from vehicle.params import Params, load_defaults, read_parm_file
 
 
 class SimDriver:
@@ -64,7 +64,11 @@ def simulated_vehicle(scenario: Scenario, kind: str, seed: int, param_file: Path
     driver = SimDriver(scenario, kind, subsystem_rng(seed, "robot"), subsystem_rng(seed, "sensors"))
     if param_file is not None:
         remove_leftovers(param_file)
-    params = load_defaults(param_file) if param_file is not None and param_file.is_file() else load_defaults()
+    stored = read_parm_file(param_file) if param_file is not None and param_file.is_file() else None
+    params = Params(stored) if stored is not None else load_defaults()
+    if stored is None or "RTL_BODY_R" not in stored:
+        # the simulated robot's footprint, set as its integrator would set a real one's (a stored value stays)
+        params.set("RTL_BODY_R", driver.robot.shape.radius)
     for k, v in scenario.params.items():
         params.set(k, v)
     vehicle = Vehicle(driver, params, scenario.start, 0.0, seed=seed, boot_epoch=boot_epoch, contingency=contingency)

@@ -18,12 +18,14 @@ from typing import TYPE_CHECKING, Protocol
 
 from vehicle.lease import ExecutionLease, ExpireReason, LeaseBook, Outcome, ServiceBlock
 from vehicle.lease_terms import State
+from vehicle.navigation import FollowerConfig
 from vehicle.port import VehiclePort
 from vehicle.returning import Way
 from vehicle.service import NAV_LOITER_TIME, NAV_WAYPOINT, ServiceState
 from vehicle.service import displacement as block_displacement
 from vehicle.service import start as start_block
 from vehicle.service import step as step_block
+from vehicle.standoff import Sweep, keep_off
 
 if TYPE_CHECKING:
     from vehicle.clearance import FreeSpace
@@ -87,6 +89,9 @@ def blocks_for(contingency: Contingency | None, blocks: tuple[ServiceBlock, ...]
     return tuple(replace(b, halt_on_regain=False) for b in blocks)
 
 
+FOLLOWER = FollowerConfig()  # the turn rate a return's follower asks for at most: the standoff's turns stay within it
+
+
 class ReturnDriver:
     """Drives the current return-service lease: the plan's block through the auto-return service, or the
     injected contingency. Mutable: it holds the running block's service state between ticks."""
@@ -107,9 +112,11 @@ class ReturnDriver:
         self.service, self.index = None, None
 
     def drive(self, t: float, cur: ExecutionLease, x: float, y: float, yaw: float, trail: Trail,
-              estimator: Estimator, outbound_speed: float, free: FreeSpace) -> tuple[float, float]:
+              estimator: Estimator, outbound_speed: float, free: FreeSpace,
+              seen: Sweep | None = None) -> tuple[float, float]:
         """One tick of ``cur``, the current return-service lease: speed and yaw rate. ``free``: what the range
-        sensor saw free, the corners the return may cut."""
+        sensor saw free, the corners the return may cut; ``seen``: the latest sweep's returns, which the robot's
+        body keeps off (``vehicle.standoff``; an injected contingency drives as it would without returnlink)."""
         v = self.vehicle
         if v.contingency is not None:
             return self._contingency(t, cur, x, y, yaw)
@@ -156,7 +163,7 @@ class ReturnDriver:
             else:
                 v.apply(v.book.finish(cur.index, step.finished, t))
             return 0.0, 0.0
-        return step.speed, step.yaw_rate
+        return keep_off(seen, t, x, y, yaw, step.speed, step.yaw_rate, v.params["RTL_BODY_R"], FOLLOWER.max_yaw_rate)
 
     def deferred(self, cur: ExecutionLease, link_lost: bool) -> bool:
         """A block that halts on regain, has run with the link lost and runs on with it back: LINK_REGAINED came

@@ -19,6 +19,7 @@ from vehicle.estimator import Estimator
 from vehicle.io import Readings, RobotDriver
 from vehicle.lease import ExecutionLease, Holder, Verdict
 from vehicle.linkmap import LinkMap, MapConfig
+from vehicle.standoff import Sweep, sweep
 from vehicle.teleop import Setpoint
 from vehicle.trail import Crumb, Trail, TrailConfig
 
@@ -54,6 +55,7 @@ class ControlLoop:
         self.trail = Trail(TrailConfig.from_params(vehicle.params))
         self.linkmap = LinkMap(MapConfig.from_params(vehicle.params))  # the owner's link over space
         self.free = FreeSpace()  # what the range sensor saw free: the corners a return may cut
+        self.sweep: Sweep | None = None  # the latest sweep's returns near the robot: what a return keeps off
         self.readings: Readings | None = None
         self._crumbs: deque[Crumb] = deque()  # recorded, waiting for their link tag to be final
         self.last_fix: tuple[float, float] | None = None  # the last fix used, for GPS_RAW_INT
@@ -83,6 +85,7 @@ class ControlLoop:
         self.linkmap.at(t, p.x, p.y)
         if r.scan is not None:
             self.free.scan(p.x, p.y, p.yaw, r.scan)
+            self.sweep = sweep(t, p.x, p.y, p.yaw, r.scan)
         book = v.book
         good = self.link_is_good = v.link_good(t)
         if v.contingency is not None:
@@ -129,7 +132,8 @@ class ControlLoop:
             self.returns.stand_down()
             return self._teleop(t)
         self.vehicle.setpoint = None
-        return self.returns.drive(t, cur, x, y, yaw, self.trail, self.estimator, self.outbound_speed, self.free)
+        return self.returns.drive(t, cur, x, y, yaw, self.trail, self.estimator, self.outbound_speed, self.free,
+                                  self.sweep)
 
     def _teleop(self, t: float) -> tuple[float, float]:
         """The operator's setpoint, if it is still alive and its lease is still the current one."""
