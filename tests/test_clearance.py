@@ -430,6 +430,33 @@ def test_the_way_on_past_a_dead_zone_target_keeps_clear_too():
     assert np.allclose(route.onward.points[-1], (0.0, 0.0))
 
 
+def test_after_a_loss_the_way_to_where_the_link_was_last_heard_keeps_its_crumbs_and_is_kept_clear_beyond():
+    """The operator drove the dead end (x 14 to 20, the link lost past 14) along a wall 0.4 m east: after a loss the
+    route retraces those crumbs as driven, where the link will come back (pushed 0.5 m off them into the drift's
+    radio shadow, gen:mine rover seed 203 took 6.40 s to link against back-up's 5.42; kept to them, 5.42), and is
+    pushed off a second wall past the place the link was heard. An operator's RTL over a good link, which has no
+    link to find, is pushed off both."""
+    trail = Trail()
+    for k in range(1001):  # north from 0 to 20 m; the link good up to 14 m
+        x = 0.02 * k
+        trail.add(Crumb(x, 0.0, 0.02 * k, 0.1, x <= 14.0, speed=1.0))
+    dead_end = [(x, 0.4) for x in np.arange(16.0, 19.0, CELL)]
+    beyond = [(x, 0.4) for x in np.arange(9.5, 12.0, CELL)]
+    free = _grid(((-3.0, 23.0), (-3.0, 3.0)), dead_end + beyond)
+    occ_dead, occ_beyond = _occupied(_grid(((0.0, 0.1), (0.0, 0.1)), dead_end)), _occupied(
+        _grid(((0.0, 0.1), (0.0, 0.1)), beyond))
+    lost = plan_route(trail, (20.0, 0.0), Target.LINK, 100.0, link_lost=True, overshoot=6.0, free=free,
+                      clearance=CLR)
+    heard_way = lost.points[lost.points[:, 0] >= 14.0 - 1e-9]
+    assert np.all(np.abs(heard_way[:, 1]) < 1e-9)  # the crumbs, as driven
+    assert _clearance(_along(heard_way), occ_dead).min() < 0.5
+    assert lost.points[:, 0].min() < 9.0  # the route passes the second wall...
+    assert _clearance(_along(lost.points), occ_beyond).min() >= CLR - CELL * math.sqrt(2)  # ...kept clear of it
+    rtl = plan_route(trail, (20.0, 0.0), Target.ORIGIN, 100.0, link_lost=False, free=free, clearance=CLR)
+    assert _clearance(_along(rtl.points), occ_dead).min() >= CLR - CELL * math.sqrt(2)
+    assert _clearance(_along(rtl.points), occ_beyond).min() >= CLR - CELL * math.sqrt(2)
+
+
 @given(st.lists(st.tuples(st.floats(0.01, 1.0), st.floats(0.0, 1.0)), min_size=1, max_size=40))
 def test_the_lean_is_what_it_says(steps):
     """keep_clear's window pass against its definition, computed the slow way."""

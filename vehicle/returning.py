@@ -338,19 +338,22 @@ def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_dis
     keep[1:] = np.hypot(*np.diff(full, axis=0).T) > 1e-9
     full, speeds = full[keep], speeds[: len(keep)][keep]
     # the corners the range sensor saw clear are cut (after a loss, only up to the stretch last driven with the
-    # link), and the route is pushed clear of what it saw occupied, as far as the seen free space allows
+    # link), and the route from there is pushed clear of what it saw occupied, as far as the seen free space allows
     # (vehicle/clearance.py); the way itself stays the crumbs
-    full, speeds = _cut_corners(full, speeds, way.heard if lost_link else 0.0, free, clearance)
-    full, speeds = keep_clear(full, speeds, free, clearance)
+    full, speeds, heard_at = _cut_corners(full, speeds, way.heard if lost_link else 0.0, free, clearance)
+    if heard_at < len(full) - 1:
+        kept, kept_speeds = keep_clear(full[heard_at:], speeds[heard_at:], free, clearance)
+        full, speeds = np.vstack([full[:heard_at], kept]), np.concatenate([speeds[:heard_at], kept_speeds])
     pts, cut = truncate(full, start, max_displacement)
     return Route(pts, (gx, gy), goal if goal >= 0 else -1, cut, speeds[: len(pts)], onward, way, by_map)
 
 
 def _cut_corners(pts: np.ndarray, speeds: np.ndarray, heard: float, free: FreeSpace | None,
-                 clearance: float) -> tuple[np.ndarray, np.ndarray]:
+                 clearance: float) -> tuple[np.ndarray, np.ndarray, int]:
     """``pts`` with the corners cut that ``free`` shows clear (``vehicle.clearance.shortcut``) up to the end of
     the last stretch the robot drove with the link, ``heard`` metres along, and the crumbs themselves from there
-    on (``heard`` 0: none ahead, every corner may be cut).
+    on (``heard`` 0: none ahead, every corner may be cut); and the index in the result of that stretch's end, from
+    which on the route is also kept clear of what the sensor saw occupied (0: all of it).
 
     The link comes back first on the stretch where it was last heard, so the route drives that stretch as it was
     driven: a straight line from a dead end to a place beyond trades the known way to the link for an unknown one.
@@ -358,15 +361,25 @@ def _cut_corners(pts: np.ndarray, speeds: np.ndarray, heard: float, free: FreeSp
     shadow and began with a turn on the spot, 6.80 s to link against 5.56 s backing up the crumbs (5.40 s now);
     building legged seed 4: a cut across the room from the doorway's last heard crumb, 5.80 s against 4.94 s.
     Before that stretch the robot is in the dead place it drove into, where a cut across seen free space loses
-    nothing (building rover seed 5: across the far room to its door, 13.52 s against 14.34 s)."""
+    nothing (building rover seed 5: across the far room to its door, 13.52 s against 14.34 s).
+
+    Up to that stretch's end the route is not pushed off the walls either (``keep_clear``): the operator drove the
+    dead end along a wall, the link returns along those crumbs, and a route 0.5 m off them is a route into the
+    drift's radio shadow (gen:mine rover seeds 188, 203, 220: 5.86, 6.40, 6.04 s to link against back-up's 5.38,
+    5.42, 5.58; kept to the crumbs, 5.38, 5.42, 5.60). The body is kept off those walls where it matters, in the
+    body frame, whatever the estimate's error (``vehicle.standoff``)."""
     cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
-    if heard <= 0.0 or heard >= cum[-1] - 1e-6:
-        return shortcut(pts, speeds, free, clearance)
+    if heard <= 0.0:
+        cut, cut_speeds = shortcut(pts, speeds, free, clearance)
+        return cut, cut_speeds, 0
+    if heard >= cum[-1] - 1e-6:  # the route ends on the stretch where the link was heard
+        cut, cut_speeds = shortcut(pts, speeds, free, clearance)
+        return cut, cut_speeds, len(cut) - 1
     j = int(np.searchsorted(cum, heard + 1e-6, side="right")) - 1  # the last point at or before it
     if j <= 0:
-        return pts, speeds
+        return pts, speeds, 0
     a_pts, a_sp = shortcut(pts[: j + 1], speeds[: j + 1], free, clearance)
-    return np.vstack([a_pts, pts[j + 1:]]), np.concatenate([a_sp[:-1], speeds[j:]])
+    return np.vstack([a_pts, pts[j + 1:]]), np.concatenate([a_sp[:-1], speeds[j:]]), len(a_pts) - 1
 
 
 def _next_stretch(linkmap: LinkMap, pts: np.ndarray, at: float, gap: tuple[int, float] | None, depth: float,
