@@ -73,7 +73,7 @@ def main(argv: list[str]) -> int:
     if len(argv) == 3 and argv[1] == "--seeds":
         seeds = _seeds(argv[2])
         if seeds is None:
-            print(f"generated_evidence: --seeds wants FIRST-LAST, e.g. 141-180, got {argv[2]!r}", file=sys.stderr)
+            print(f"generated_evidence: --seeds wants FIRST-LAST, e.g. 221-260, got {argv[2]!r}", file=sys.stderr)
             return 2
     elif len(argv) != 1:
         print(__doc__, file=sys.stderr)
