@@ -3,6 +3,7 @@ product's promises (docs/architecture.md §3, §6, §7)."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import re
@@ -176,12 +177,17 @@ def test_same_scenario_and_seed_give_identical_metrics():
 def test_a_return_pressed_against_rock_ends_stuck_without_poisoning_the_estimate(tmp_path, vehicle):
     """tunnel with a one-waypoint plan straight into the end of the drift: the robot reaches the rock and its
     wheels spin (its feet slip). The block used to run on dead reckoning toward an estimated arrival; now the
-    odometry's disagreement with the accelerometer ends it STUCK within seconds, the estimate where the robot is."""
+    odometry's disagreement with the accelerometer ends it STUCK within seconds, the estimate where the robot is.
+    That is a robot whose footprint nobody gave (RTL_BODY_R 0); one that knows it stops short of the rock its
+    sweep shows, touches nothing, and ends STUCK for want of progress."""
     text = (Path(sim.__file__).parent / "scenarios" / "tunnel.toml").read_text()
     text = re.sub(r"\nplan = \[.*?\n\]", '\nplan = [{ command = "WAYPOINT", x = 61.2, y = 21.2 }]', text, flags=re.S)
     path = tmp_path / "tunnel-into-the-rock.toml"
     path.write_text(text)
-    r = Run(load(str(path)), vehicle).run()
+    sc = load(str(path))
+    kept = Run(sc, vehicle).run()
+    assert kept.blocks[0].reason == "STUCK" and kept.world.collisions == 0
+    r = Run(dataclasses.replace(sc, params={**sc.params, "RTL_BODY_R": 0.0}), vehicle).run()
     blk = r.blocks[0]
     assert blk.reason == "STUCK"
     k0, k1 = (int(round(t / DT)) - 1 for t in (blk.started, blk.ended))
