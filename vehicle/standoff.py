@@ -88,22 +88,22 @@ def keep_off(seen: Sweep | None, t: float, x: float, y: float, yaw: float, speed
     dx, dy = seen.x - x, seen.y - y
     c, s = math.cos(yaw), math.sin(yaw)
     fwd, right = dx * c + dy * s, -dx * s + dy * c  # each return in the body frame of now
-    now = float(np.min(np.hypot(fwd, right))) - body
-    reach = abs(speed) * HORIZON + body + STANDOFF
-    close = np.hypot(fwd, right) <= reach
+    dist = np.hypot(fwd, right)
+    now = float(dist.min()) - body
+    close = dist <= abs(speed) * HORIZON + body + STANDOFF
     if not close.any():
         return speed, yaw_rate
     fwd, right = fwd[close], right[close]
     turns = np.clip(yaw_rate + TURNS, -max_yaw_rate, max_yaw_rate)
-    clear = {}
-    for pace in PACES:
-        af, ar = _arcs(speed * pace, turns)  # (turn, sample)
-        d = np.hypot(fwd[None, None, :] - af[:, :, None], right[None, None, :] - ar[:, :, None]).min(axis=2) - body
-        clear[pace] = d.min(axis=1)
+    clear: dict[float, np.ndarray] = {}  # per pace, each turn's least clearance along its arc (worked out once)
     # STANDOFF where an arc keeps it; where none does (a door barely wider than the robot), any arc that touches
     # nothing, at the slowest pace; else a stop
     for need, paces in ((min(STANDOFF, now), PACES), (min(0.0, now), PACES[-1:])):
         for pace in paces:
+            if pace not in clear:
+                af, ar = _arcs(speed * pace, turns)  # (turn, sample)
+                d = np.hypot(fwd[None, None, :] - af[:, :, None], right[None, None, :] - ar[:, :, None])
+                clear[pace] = d.min(axis=2).min(axis=1) - body
             ok = clear[pace] >= need - 1e-9
             if ok.any():
                 i = int(np.flatnonzero(ok)[0])  # TURNS is ordered by how far it leaves the follower's turn
