@@ -369,12 +369,9 @@ def _cut_corners(pts: np.ndarray, speeds: np.ndarray, heard: float, free: FreeSp
     5.42, 5.58; kept to the crumbs, 5.38, 5.42, 5.60). The body is kept off those walls where it matters, in the
     body frame, whatever the estimate's error (``vehicle.standoff``)."""
     cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
-    if heard <= 0.0:
+    if heard <= 0.0 or heard >= cum[-1] - 1e-6:  # no such stretch, or the route ends on it: every corner
         cut, cut_speeds = shortcut(pts, speeds, free, clearance)
-        return cut, cut_speeds, 0
-    if heard >= cum[-1] - 1e-6:  # the route ends on the stretch where the link was heard
-        cut, cut_speeds = shortcut(pts, speeds, free, clearance)
-        return cut, cut_speeds, len(cut) - 1
+        return cut, cut_speeds, 0 if heard <= 0.0 else len(cut) - 1
     j = int(np.searchsorted(cum, heard + 1e-6, side="right")) - 1  # the last point at or before it
     if j <= 0:
         return pts, speeds, 0

@@ -27,7 +27,7 @@ from link.plan_items import (  # the MAV_CMD numbers of the items a plan may hol
 from vehicle.clearance import FreeSpace
 from vehicle.lease import ExpireReason, ServiceBlock
 from vehicle.linkmap import LinkMap
-from vehicle.navigation import FollowerConfig, Path, follow
+from vehicle.navigation import FollowCommand, FollowerConfig, Path, follow
 from vehicle.params import Params
 from vehicle.returning import LINK_TAG_LAG_S, SPEED_RANGE, Route, Target, Way, continue_from, plan_route, truncate
 from vehicle.trail import Trail
@@ -192,12 +192,19 @@ def _first_move(st: ServiceState, x: float, y: float, yaw: float, t: float, para
     telemetry packet is heard or the station waits for the next one 0.25 s later (gen:mine legged seed 118: 5.44 s
     to link against back-up's 5.16; over the mine's seeds 101-180 returnlink was the slower of the two in 18
     trials and the faster in 5)."""
-    through = link_lost and not regaining and _may_go_on(st)
-    cmd = follow(st.path, x, y, yaw, st.progress, cruise(st), FollowerConfig.from_params(params), st.reverse, through)
+    cmd = _follow(st, x, y, yaw, FollowerConfig.from_params(params), link_lost, regaining)
     if cmd.arrived:  # there already: the next tick's step handles the arrival, as for any route
         return ServiceStep(st, 0.0, 0.0, replanned=True)
     st = replace(st, progress=cmd.progress, reverse=cmd.reverse, best_remaining=cmd.remaining, last_progress_at=t)
     return ServiceStep(st, cmd.speed, cmd.yaw_rate, replanned=True)
+
+
+def _follow(st: ServiceState, x: float, y: float, yaw: float, cfg: FollowerConfig, link_lost: bool,
+            regaining: bool) -> FollowCommand:
+    """The follower's command on the block's route from where it got to. With the link down and a way on past the
+    target, the target is a waypoint, not a stop: no easing into it."""
+    through = link_lost and not regaining and _may_go_on(st)
+    return follow(st.path, x, y, yaw, st.progress, cruise(st), cfg, st.reverse, through)
 
 
 def cruise(st: ServiceState) -> float:
@@ -265,9 +272,7 @@ def step(st: ServiceState, x: float, y: float, yaw: float, t: float, trail: Trai
         # past a dead-zone target only for want of the link: it is back (a block that continues on regain)
         return ServiceStep(st, 0.0, 0.0, ExpireReason.COMPLETED)
     cfg = FollowerConfig.from_params(params)
-    # with the link down and a way on past the target, the target is a waypoint, not a stop: no easing into it
-    through = link_lost and not regaining and _may_go_on(st)
-    cmd = follow(st.path, x, y, yaw, st.progress, cruise(st), cfg, st.reverse, through)
+    cmd = _follow(st, x, y, yaw, cfg, link_lost, regaining)
     if cmd.arrived:
         onward = _go_on(replace(st, progress=cmd.progress), x, y, t, params, link_lost)
         if onward is not None:
