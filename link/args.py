@@ -44,11 +44,27 @@ def number(what: str, lo: float = -math.inf, hi: float = math.inf, lo_open: bool
     return parse
 
 
+def point(what: str) -> Callable[[str], tuple[float, float]]:
+    """Two finite numbers ``X,Y`` (a place in metres)."""
+    def parse(text: str) -> tuple[float, float]:
+        parts = text.split(",")
+        try:
+            x, y = (float(p) for p in parts) if len(parts) == 2 else (math.nan, math.nan)
+        except ValueError:
+            x = y = math.nan
+        if not (math.isfinite(x) and math.isfinite(y)):
+            raise argparse.ArgumentTypeError(f"{what} must be X,Y (two finite numbers, metres), got {text!r}")
+        return x, y
+    parse.__name__ = what
+    return parse
+
+
 SYSID = integer(1, 255, "system id")
 COMPID = integer(1, 255, "component id")
 PORT = integer(1, 65535, "port")
 LISTEN_PORT = integer(0, 65535, "port")  # 0: any free port
 SEED = integer(0, 2**32 - 1, "seed")
+STATION = point("station")  # a map's frame: x east, y north
 SECONDS = number("seconds", 0.0, lo_open=True)
 SECONDS_OR_INF = number("seconds", 0.0, lo_open=True, allow_inf=True)
 SPEEDUP = number("speedup", 0.0, lo_open=True)

@@ -29,17 +29,21 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def _scenario(name: str, seed: int | None = None):
+def _scenario(name: str, seed: int | None = None, args: argparse.Namespace | None = None):
     """The scenario (a generated one drawn from ``seed``, saying how many draws were redrawn); exit 2 if bad."""
-    return _scenario_world(name, seed)[0]
+    return _scenario_world(name, seed, args=args)[0]
 
 
-def _scenario_world(name: str, seed: int | None, announce: bool = True):
-    from sim.scenario import ScenarioError
+def _scenario_world(name: str, seed: int | None, announce: bool = True, args: argparse.Namespace | None = None):
+    """The scenario with the map options of ``args`` (``--station``, ``--radio``) where it has them."""
+    from sim.scenario import ScenarioError, read_radio_file
     from sim.worlds.resolve import load
 
+    station = getattr(args, "station", None)
+    radio_file = getattr(args, "radio", None)
     try:
-        sc, redraws = load(name, seed)
+        radio = read_radio_file(radio_file) if radio_file else None
+        sc, redraws = load(name, seed, station, radio)
     except (ScenarioError, OSError, UnicodeDecodeError) as e:
         print(f"returnlink: error: {e}", file=sys.stderr)
         raise SystemExit(2) from None
@@ -141,7 +145,7 @@ def _cmd_sim_run(args: argparse.Namespace) -> int:
         return _cmd_sim_replay(args)
     if args.scenario is None:
         return _usage_error("sim run needs a SCENARIO (or --replay DIR TRIAL)")
-    sc = _run_overrides(_scenario(args.scenario, args.seed), args)
+    sc = _run_overrides(_scenario(args.scenario, args.seed, args), args)
     kind = args.vehicle or sc.vehicle
     policy = _policy_for(args, kind)
     if args.px4 and kind != PX4_VEHICLE:
@@ -545,7 +549,7 @@ def _cmd_sim_serve(args: argparse.Namespace) -> int:
     from sim.policies import FIRMWARE_VEHICLE
     from sim.serve import Server
 
-    sc = _scenario(args.scenario, args.seed)
+    sc = _scenario(args.scenario, args.seed, args)
     if args.px4 and args.vehicle != "px4rover":
         raise _fail(f"--px4 goes with --vehicle px4rover (got vehicle {args.vehicle or sc.vehicle})")
     if args.vehicle in (FIRMWARE_VEHICLE, "px4rover"):
@@ -596,10 +600,16 @@ def _cmd_sim_world(args: argparse.Namespace) -> int:
     from sim.worlds.render import render
     from sim.worlds.toml_out import to_toml
 
-    sc, redraws = _scenario_world(args.scenario, args.seed, announce=False)
+    sc, redraws = _scenario_world(args.scenario, args.seed, announce=False, args=args)
     out = Path(args.out)
     _writable_dir(out)
     verdict = check(sc)
+    if sc.site is not None:  # a map world's walls are its cells: the route's clearance comes from the map
+        from dataclasses import replace
+
+        from sim.maps.routes import route_clearance
+
+        verdict = replace(verdict, clearance_m=route_clearance(sc))
     try:
         write_atomic(out / "world.toml", to_toml(sc).encode("utf-8"))
         png = render(sc, out / "world.png", verdict)
@@ -619,10 +629,20 @@ def _cmd_sim_world(args: argparse.Namespace) -> int:
 
 def _add_world_parser(sim) -> None:
     w = sim.add_parser("world", help="draw a scenario's map and write it out as a scenario file (gen:KIND too)")
-    w.add_argument("scenario", help="a built-in scenario, gen:office, gen:mine, gen:culvert, or a .toml file")
+    w.add_argument("scenario", help="a built-in scenario, gen:office, gen:mine, gen:culvert, map:PATH.yaml (with "
+                                    "--station), or a .toml file")
     w.add_argument("--seed", type=types.SEED, help="the seed that picks a generated world (default: the scenario's)")
     w.add_argument("--out", required=True, help="directory for world.png and world.toml")
+    add_map_options(w)
     w.set_defaults(func=_cmd_sim_world)
+
+
+def add_map_options(p) -> None:
+    """``--station`` and ``--radio``, for a ``map:PATH.yaml`` world (docs/architecture.md §7.2)."""
+    p.add_argument("--station", type=types.STATION, metavar="X,Y",
+                   help="with map:PATH.yaml: where the ground station stands (map frame, metres: x east, y north)")
+    p.add_argument("--radio", metavar="FILE",
+                   help="a [radio] table (returnlink site fit writes one) on top of the scenario's radio")
 
 
 def _cmd_keys(args: argparse.Namespace) -> int:
@@ -659,7 +679,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim = sub.add_parser("sim", help="the simulator").add_subparsers(dest="sim_command", required=True)
     run = sim.add_parser("run", help="run a scenario in lockstep, as fast as possible")
     run.add_argument("scenario", nargs="?", help="a built-in scenario name, gen:KIND (a world generated from the "
-                                                "seed: gen:office, gen:mine, gen:culvert) or a .toml file")
+                                                "seed: gen:office, gen:mine, gen:culvert), map:PATH.yaml (a world "
+                                                "made from a ROS map_server map, with --station) or a .toml file")
     run.add_argument("--seed", type=types.SEED, help="random seed (default: the scenario's)")
     run.add_argument("--vehicle", choices=["rover", "legged", "ardurover", "px4rover"],
                      help="robot model (default: the scenario's); ardurover: the scenario's rover driven by the real "
@@ -674,6 +695,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "failsafe: px4-hold or px4-return (the default; §10.1), or companion beside PX4 (§11.2)")
     _add_firmware_option(run)
     _add_px4_option(run)
+    add_map_options(run)
     _add_run_campaign_options(run)
     run.set_defaults(func=_cmd_sim_run)
     _add_sweep_parser(sim)
@@ -690,6 +712,7 @@ def build_parser() -> argparse.ArgumentParser:
                             "companion")
     _add_firmware_option(serve)
     _add_px4_option(serve)
+    add_map_options(serve)
     serve.add_argument("--seed", type=types.SEED)
     serve.add_argument("--speedup", type=types.SPEEDUP, default=1.0, help="run K times faster than real time")
     serve.add_argument("--port", type=types.LISTEN_PORT, default=14580, help="UDP port the vehicle listens on")

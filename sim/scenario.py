@@ -16,7 +16,7 @@ import difflib
 import math
 import re
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -32,6 +32,8 @@ from link.plan_items import (
     check_fields,
 )
 from link.radio import RadioParams
+from sim.maps import mapfile
+from sim.maps.grid import DEFAULT_WALL_DB, DEFAULT_WALL_DB_PER_M, UNKNOWN, Site
 from sim.world import Station, Wall, World
 from vehicle.lease import ExpireReason
 from vehicle.params import BY_NAME, ParamError, validate
@@ -55,6 +57,11 @@ PLAN_KEYS = {NAV_RETURN_TO_LINK: {"max_displacement": 1, "speed": 2, "target": 3
 SEED_MAX = 2**32 - 1
 # what a file with [generate] may hold beside it: the rest of the scenario is generated with the world
 GENERATE_KEYS = ("name", "description", "duration", "seed", "vehicle", "generate")
+# [map] (docs/architecture.md §7.2): the map_server YAML, the station in the map's frame, the grid's radio loss
+MAP_KEYS = ("file", "station", "power_dbm", "unknown", "wall_db", "wall_db_per_m", "digest")
+MAP_LOSS = ("wall_db", "wall_db_per_m")  # what a [radio] table may add for a map world (what `site fit` writes)
+# what a file with [map] and no [operator] may hold: the operator's route is drawn on the map from the seed
+MAP_WORLD_KEYS = ("name", "description", "duration", "seed", "vehicle", "map", "radio")
 
 
 class ScenarioError(ValueError):
@@ -114,8 +121,11 @@ class Scenario:
     params: dict[str, float] = field(default_factory=dict)
     events: tuple[Event, ...] = ()
     criteria: Criteria = Criteria()
+    site: Site | None = None  # a map whose cells are the walls (docs/architecture.md §7.2), or None
 
     def world(self) -> World:
+        if self.site is not None:
+            return self.site.world(self.denied, self.stations)
         return World(self.walls, self.denied, self.stations)
 
     def station(self, name: str) -> Station:
@@ -260,19 +270,123 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
         raise ScenarioError(file, _header_line(r, "generate"), "generate", "a generated world: read it with "
                             "sim.worlds.resolve (returnlink sim run, sim world and sim sweep do)")
     r.known(raw, "", ("name", "description", "duration", "seed", "vehicle", "world", "radio", "start", "operator",
-                      "events", "criteria"))
+                      "events", "criteria", "map"))
     r.finite(raw, "")
     name = r.get(raw, "name", "name", str)
     vehicle, seed = _vehicle_and_seed(r, raw)
-    bounds, walls, denied, stations = _world(r, raw)
+    mt = read_map(r, raw, file)
+    if mt is not None and "operator" not in raw:
+        raise ScenarioError(file, _header_line(r, "map"), "map", "a map world without [operator]: its route is "
+                            "drawn from the seed; read it with sim.worlds.resolve (returnlink sim run, sim world and "
+                            "sim sweep do)")
+    bounds, walls, denied, stations = _world(r, raw, mt)
     op = _operator(r, raw, stations)
+    radio, loss = _radio(r, raw, MAP_LOSS if mt else ())
     return Scenario(
         name=name, description=r.get(raw, "description", "description", str, ""), file=file,
         duration=r.number(raw, "duration", "duration", lo=1.0, hi=36000.0),
         seed=seed, vehicle=vehicle, bounds=bounds, walls=walls, denied=denied, stations=stations,
-        radio=_radio(r, raw), start=_start(r, raw), **op, events=_events(r, raw, stations),
-        criteria=_criteria(r, raw),
+        radio=radio, start=_start(r, raw), **op, events=_events(r, raw, stations),
+        criteria=_criteria(r, raw), site=replace(mt.site, **loss) if mt else None,
     )
+
+
+@dataclass(frozen=True)
+class MapTable:
+    """A scenario's ``[map]`` table, checked: the map (a Site) and the station it names (world frame), if any."""
+
+    site: Site
+    station: Station | None
+    line: int | None
+
+
+def read_map(r: _Reader, raw: dict, file: str) -> MapTable | None:
+    """``[map]``: the map_server YAML (relative to the scenario file), read now so a bad map is an error at this
+    line; the station (map frame, x east y north) turned into the world frame (north, east) and checked against
+    the map's cells."""
+    if "map" not in raw:
+        return None
+    m = r.table(raw, "map", "map", MAP_KEYS)
+    name = r.get(m, "file", "map.file", str)
+    path = Path(name)
+    if not path.is_absolute():
+        path = (Path(file).parent if file and not file.startswith(("<", "map:")) else Path(".")) / name
+    unknown = r.get(m, "unknown", "map.unknown", str, "wall")
+    if unknown not in UNKNOWN:
+        raise r.fail("map.unknown", f"must be one of {', '.join(UNKNOWN)}, got {unknown!r}")
+    wall_db = r.number(m, "wall_db", "map.wall_db", DEFAULT_WALL_DB, 0.0, 200.0)
+    per_m = r.number(m, "wall_db_per_m", "map.wall_db_per_m", DEFAULT_WALL_DB_PER_M, 0.0, 200.0)
+    digest = r.get(m, "digest", "map.digest", str, "")
+    try:
+        occupancy = mapfile.read(path)
+    except mapfile.MapError as e:
+        raise r.fail("map.file", str(e)) from None
+    if digest and digest != occupancy.digest:
+        raise r.fail("map.digest", f"the map {path} has changed since this world was written (its content is "
+                                   f"{occupancy.digest} now, {digest} then)")
+    site = Site(str(path.resolve()), unknown, wall_db, per_m, occupancy.digest)
+    station = None
+    if "station" in m:
+        x, y = r.point(r.get(m, "station", "map.station", list), "map.station")
+        station = Station("gcs", y, x, 255, r.number(m, "power_dbm", "map.power_dbm", 20.0, *STATION_POWER_DBM))
+        problem = site.grid().station_problem(station.x, station.y)
+        if problem:
+            raise r.fail("map.station", f"the station at x {x:g}, y {y:g} (map frame) {problem} of {path}")
+    return MapTable(site, station, _header_line(r, "map"))
+
+
+@dataclass(frozen=True)
+class MapWorld:
+    """A file with ``[map]`` and no ``[operator]``: the map, the station, the radio and what the file sets; the
+    route is drawn per seed (``sim.maps.routes``)."""
+
+    file: str
+    table: MapTable
+    radio: RadioParams
+    seed: int
+    vehicle: str
+    name: str
+    description: str | None = None
+    duration: float | None = None
+
+
+def read_map_world(text: str, file: str) -> MapWorld | None:
+    """The map world of a scenario file with ``[map]`` and no ``[operator]``, every field checked by file, line
+    and field; None for any other file."""
+    raw, r = _load_toml(text, file)
+    if "map" not in raw or "operator" in raw:
+        return None
+    r.known(raw, "", MAP_WORLD_KEYS)
+    r.finite(raw, "")
+    mt = read_map(r, raw, file)
+    if mt.station is None:
+        raise r.fail("map.station", "is required: where the operator's station stands (map frame, metres: x east, "
+                                    "y north), from which the route is drawn")
+    radio, loss = _radio(r, raw, MAP_LOSS)
+    vehicle, seed = _vehicle_and_seed(r, raw)
+    name = r.get(raw, "name", "name", str, f"map:{Path(mt.site.file).stem}")
+    return MapWorld(file, replace(mt, site=replace(mt.site, **loss)), radio, seed, vehicle, name,
+                    r.get(raw, "description", "description", str, None),
+                    r.number(raw, "duration", "duration", None, lo=1.0, hi=36000.0))
+
+
+def read_radio_file(path: str) -> tuple[dict[str, float], dict[str, float]]:
+    """A ``--radio FILE``'s ``[radio]`` table (what `site fit` writes): the radio model's fields and the map's
+    wall loss, each checked by file, line and field."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise ScenarioError(path, None, "", f"cannot read the radio file: {getattr(e, 'strerror', None) or e}") \
+            from None
+    raw, r = _load_toml(text, path)
+    r.known(raw, "", ("radio",))
+    r.finite(raw, "")
+    if "radio" not in raw:
+        raise ScenarioError(path, None, "radio", "is required: a [radio] table (returnlink site fit writes one)")
+    radio, loss = _radio(r, raw, MAP_LOSS)
+    given = r.get(raw, "radio", "radio", dict)
+    return ({k: getattr(radio, k) for k in given if k in RadioParams.__dataclass_fields__},
+            {k: v for k, v in loss.items() if k in given})
 
 
 def _load_toml(text: str, file: str) -> tuple[dict, _Reader]:
@@ -301,9 +415,16 @@ def _vehicle_and_seed(r: _Reader, raw: dict) -> tuple[str, int]:
     return vehicle, seed
 
 
-def _world(r: _Reader, raw: dict) -> tuple[tuple[float, ...], tuple[Wall, ...], tuple, tuple[Station, ...]]:
-    """[world]: bounds, walls, radio-denied zones and ground stations."""
-    world = r.table(raw, "world", "world", ("bounds", "walls", "denied", "stations"))
+def _world(r: _Reader, raw: dict, mt: MapTable | None = None) -> tuple[tuple[float, ...], tuple[Wall, ...], tuple,
+                                                                      tuple[Station, ...]]:
+    """[world]: bounds, walls, radio-denied zones and ground stations. A map world's walls are its cells, its
+    bounds the map's unless given, and its [map] station is the first station."""
+    world = r.table(raw, "world", "world", ("bounds", "walls", "denied", "stations"), {} if mt else ...)
+    if mt is not None and world.get("walls"):
+        raise r.fail("world.walls", "a map world's walls are its occupied cells: draw them on the map")
+    if mt is not None and "bounds" not in world:
+        g = mt.site.grid().bounds()
+        world = {**world, "bounds": [math.floor(g[0]), math.floor(g[1]), math.ceil(g[2]), math.ceil(g[3])]}
     b = r.get(world, "bounds", "world.bounds", list)
     if len(b) != 4 or not all(isinstance(c, (int, float)) for c in b) or b[0] >= b[2] or b[1] >= b[3]:
         raise r.fail("world.bounds", "must be [xmin, ymin, xmax, ymax] with min < max")
@@ -327,21 +448,25 @@ def _world(r: _Reader, raw: dict) -> tuple[tuple[float, ...], tuple[Wall, ...], 
             raise r.fail(f"{p}.sysid", f"must be 1..255, got {sysid}")
         stations.append(Station(r.get(s, "name", f"{p}.name", str), x, y, sysid,
                                 r.number(s, "power_dbm", f"{p}.power_dbm", 20.0, *STATION_POWER_DBM)))
+    if mt is not None and mt.station is not None and mt.station.name not in {s.name for s in stations}:
+        stations.insert(0, mt.station)
     if not stations:
         raise r.fail("world.stations", "needs at least one ground station")
     return tuple(float(c) for c in b), tuple(walls), denied, tuple(stations)
 
 
-def _radio(r: _Reader, raw: dict) -> RadioParams:
-    """[radio]: the radio model's parameters (any left out keep their defaults)."""
-    radio_raw = r.table(raw, "radio", "radio", RadioParams.__dataclass_fields__, {})
+def _radio(r: _Reader, raw: dict, extra: tuple[str, ...] = ()) -> tuple[RadioParams, dict[str, float]]:
+    """[radio]: the radio model's parameters (any left out keep their defaults), and those of ``extra`` (a map
+    world's wall loss, dB) that it gives."""
+    radio_raw = r.table(raw, "radio", "radio", (*RadioParams.__dataclass_fields__, *extra), {})
     radio_kw = {}
     for fname in RadioParams.__dataclass_fields__:
         if fname in radio_raw:
             flag = isinstance(getattr(RadioParams, fname), bool)  # an option (reorder), not a number
             radio_kw[fname] = (r.get(radio_raw, fname, f"radio.{fname}", bool) if flag
                                else r.number(radio_raw, fname, f"radio.{fname}"))
-    return RadioParams(**radio_kw)
+    more = {k: r.number(radio_raw, k, f"radio.{k}", lo=0.0, hi=200.0) for k in extra if k in radio_raw}
+    return RadioParams(**radio_kw), more
 
 
 def _start(r: _Reader, raw: dict) -> tuple[float, float, float]:

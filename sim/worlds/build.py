@@ -84,16 +84,17 @@ def plan(max_displacement: float) -> tuple[PlanItem, ...]:
 
 
 def scenario(kind: str, description: str, walls: Sequence[Wall], denied, station: Station, radio: RadioParams,
-             line: Sequence[geo.Point], speed: float) -> Scenario:
+             line: Sequence[geo.Point], speed: float, site=None) -> Scenario:
     """The scenario of a drawn place: ``line`` is the centre line to drive, from the start; the robot starts on
-    ``line[0]`` facing ``line[1]`` (to the whole degree)."""
+    ``line[0]`` facing ``line[1]`` (to the whole degree). ``site``: the map whose cells are the walls
+    (``sim.maps``), if the place is one."""
     line = [pt(p) for p in line]
     yaw = math.radians(round(math.degrees(math.atan2(line[1][1] - line[0][1], line[1][0] - line[0][0]))))
     sc = Scenario(name=f"gen:{kind}", description=description, file=f"gen:{kind}", duration=120.0, seed=1,
                   vehicle="rover", bounds=_bounds(walls, [*line, (station.x, station.y)]), walls=tuple(walls),
                   denied=tuple(tuple(pt(p) for p in poly) for poly in denied), stations=(station,), radio=radio,
                   start=(line[0][0], line[0][1], yaw), operator_station=station.name, teleop="velocity",
-                  route=waypoints(line, speed), resume_route=(), plan=plan(0.0), criteria=CRITERIA)
+                  route=waypoints(line, speed), resume_route=(), plan=plan(0.0), criteria=CRITERIA, site=site)
     dies = _dies_at(sc, line)
     if dies is not None:
         line = [pt(p) for p in geo.cut(line, min(geo.length(line), dies + AFTER_DEATH))]

@@ -24,6 +24,10 @@ from sim.worlds.check import Verdict, steered_path  # noqa: E402
 def render(sc: Scenario, path: Path, verdict: Verdict | None = None) -> Path:
     """Draw ``sc`` (east to the right, north up, as ``sim/plots.py``) to ``path``."""
     fig, ax = plt.subplots(figsize=(9, 7))
+    if sc.site is not None:  # a map world: its cells
+        from sim.maps.draw import draw_grid
+
+        draw_grid(ax, sc.site.grid())
     top = max([w.attenuation_db for w in sc.walls] or [1.0])
     norm = colors.Normalize(0.0, max(top, 1.0))
     cmap = plt.get_cmap("plasma_r")
@@ -34,7 +38,8 @@ def render(sc: Scenario, path: Path, verdict: Verdict | None = None) -> Path:
         pts = np.array(wall.points)
         ax.plot(pts[:, 1], pts[:, 0], color=cmap(norm(wall.attenuation_db)), lw=max(1.5, wall.thickness * 4),
                 solid_capstyle="round", zorder=2)
-    fig.colorbar(cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.7, label="wall attenuation (dB)")
+    if sc.site is None:
+        fig.colorbar(cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.7, label="wall attenuation (dB)")
     for s in sc.stations:
         ax.plot(s.y, s.x, marker="^", ms=11, color="tab:purple", zorder=5, ls="none", label="station")
         ax.annotate(f"{s.name} ({s.power_dbm:g} dBm)", (s.y, s.x), textcoords="offset points", xytext=(6, 6),
@@ -56,7 +61,9 @@ def render(sc: Scenario, path: Path, verdict: Verdict | None = None) -> Path:
     ax.set_aspect("equal")
     ax.set_xlabel("east (m)")
     ax.set_ylabel("north (m)")
-    ax.set_title(f"{sc.name} (seed {sc.seed})")
+    loss = (f"; walls {sc.site.wall_db:g} dB a crossing + {sc.site.wall_db_per_m:g} dB/m" if sc.site is not None
+            else "")
+    ax.set_title(f"{sc.name} (seed {sc.seed}{loss})")
     handles, labels = ax.get_legend_handles_labels()
     unique = dict(zip(labels, handles, strict=True))
     ax.legend(unique.values(), unique.keys(), loc="best", fontsize=7)

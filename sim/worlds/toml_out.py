@@ -1,6 +1,7 @@
 """A Scenario written back as a scenario file: ``world.toml`` of ``returnlink sim world``.
 
-The file is an ordinary scenario (no ``[generate]``): reading it back with ``sim.scenario.parse`` gives the same
+The file is an ordinary scenario (no ``[generate]``; a map world keeps its ``[map]`` table, naming the map
+by its resolved path and its content's digest, with the stations written in the world frame): reading it back with ``sim.scenario.parse`` gives the same
 Scenario, field for field, so ``sim run world.toml --seed N`` flies exactly the run ``sim run gen:KIND --seed N``
 flew. Floats are written with ``repr`` (the shortest text that reads back as the same double), and the start's
 heading, kept in radians but written in degrees, as the degrees that convert back to the very same radians.
@@ -54,6 +55,11 @@ def to_toml(sc: Scenario) -> str:
     out = [f"name = {_value(sc.name)}", f"description = {_value(sc.description)}",
            f"duration = {_value(float(sc.duration))}", f"seed = {sc.seed}", f"vehicle = {_value(sc.vehicle)}", "",
            "[world]", f"bounds = {_value([float(b) for b in sc.bounds])}"]
+    if sc.site is not None:  # a map world: its walls are the map's cells, named by file and content
+        site = sc.site
+        out[-2:-2] = ["[map]", f"file = {_value(site.file)}", f"unknown = {_value(site.unknown)}",
+                      f"wall_db = {_value(float(site.wall_db))}",
+                      f"wall_db_per_m = {_value(float(site.wall_db_per_m))}", f"digest = {_value(site.digest)}", ""]
     for w in sc.walls:
         out += ["", "[[world.walls]]", f"points = {_value([list(p) for p in w.points])}",
                 f"thickness = {_value(float(w.thickness))}", f"attenuation_db = {_value(float(w.attenuation_db))}"]
