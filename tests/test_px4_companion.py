@@ -262,7 +262,15 @@ def test_the_companion_returns_px4_in_offboard_and_leaves_it_in_hold(tmp_path, m
     assert (out / "trajectory.png").stat().st_size > 0 and (out / "timeline.png").stat().st_size > 0
     assert m["vehicle"] == "px4rover" and m["policy"] == "companion" and m["firmware"].startswith("PX4 v")
     reasons = [e["reason"] for e in m["lease_events"]]
-    assert reasons == ["NONE", "COMMS_LOST", "LINK_REGAINED"], m["lease_events"]
+    # The first loss and its return are what PX4 and the companion guarantee. What follows the operator's claim
+    # varies from run to run with PX4's own threads (when its Offboard takes the operator's drive again; a drive on
+    # along the fringe lost the link once more in about one run of twelve): any later loss, each ended by a return
+    # of its own or still running when the run ends, none touching a wall (collisions_during_return below).
+    assert reasons[:3] == ["NONE", "COMMS_LOST", "LINK_REGAINED"], m["lease_events"]
+    later = reasons[3:]
+    assert all(r in ("COMMS_LOST", "LINK_REGAINED", "COMPLETED") for r in later), m["lease_events"]
+    assert later[::2] == ["COMMS_LOST"] * len(later[::2]), m["lease_events"]  # each loss, then its return's end
+    assert "COMMS_LOST" not in later[1::2], m["lease_events"]
     assert m["regained_by"] == "return" and m["collisions_during_return"] == 0 and m["stale_commands_executed"] == 0
     block = m["blocks"][0]
     assert block["command"] == "RETURN_TO_LINK" and block["distance_m"] > 1.0

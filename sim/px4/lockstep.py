@@ -6,8 +6,10 @@ HIL_SENSOR per 4 ms physics step, PX4's wheel commands back), reads everything P
 18570+i) into a ``Tap`` (the truth about it: nav state, arming, estimate, version, its clock), lets a caller send
 it MAVLink on that link, and stops it. The radio, the operator and the record around it are the caller's.
 
-PX4's GCS link answers whoever spoke to it last, and speaks to UDP 14550 until someone has. So the lockstep speaks
-first, from its own socket, as soon as PX4 is up: a REQUEST_MESSAGE for AUTOPILOT_VERSION (its version for
+PX4's GCS link answers whoever spoke to it last, and until someone has it speaks to the port its start-up script
+names (PX4's own script: UDP 14550, every ground station's). The run's PX4 is started speaking to the lockstep's own
+socket (``PX4Process(gcs_port=...)``), so nothing of it reaches another program; and the lockstep still speaks
+first, as soon as PX4 is up: a REQUEST_MESSAGE for AUTOPILOT_VERSION (its version for
 metrics.json) from a system id that is no ground station and in a message that is no HEARTBEAT, so PX4 learns where
 to send without counting it as its data link (PX4 counts only a GCS-type HEARTBEAT as one: Commander's
 ``heartbeat_type_gcs``). From then on the only GCS PX4 hears is what the loop's radio delivers.
@@ -184,7 +186,8 @@ class PX4Lockstep:
         self.px4_addr = ("127.0.0.1", GCS_UDP_PORT + instance)
         self.bridge = HilBridge(server, self.origin, clock=self._clock, watch=[self.sock], seed=self.seed)
         try:
-            self.process = PX4Process(self.px4_dir, instance, self.params).start()
+            self.process = PX4Process(self.px4_dir, instance, self.params,
+                                      gcs_port=self.sock.getsockname()[1]).start()
         except PX4Error as e:
             raise PX4Unusable(str(e)) from None
         try:

@@ -12,6 +12,13 @@ UDP 18570+N, the API link 14580+N (payload 14280+N, gimbal 13030+N). The instanc
 runs never share one; PX4's other ports of that instance, and its per-instance server lock ``/tmp/px4_lock-N``,
 are checked free before it starts.
 
+Where PX4 sends before anyone has talked to it is moved too. Its start-up script (``px4-rc.mavlink``) starts the
+GCS link with no remote port, so it speaks to UDP 14550 (every ground station's port, a ``returnlink companion``
+walkthrough's, a MAVProxy's) until a partner talks, and the API link to 14540+N (MAVSDK's). Each run lays its own
+copy of that script in its ``bin/``, found first on PX4's search path, with ``-o`` naming ports of the run's own:
+the GCS link's ``gcs_port`` (the caller's own socket, or 18470+N) and the API link's 18370+N. Nothing outside the
+run hears it. A tree whose script lacks those lines runs with its own (``remote_ports`` then says None).
+
 Parameters are preset through ``PX4_PARAM_<NAME>`` environment variables, which rcS applies with ``param set``
 early; the SITL defaults and the airframe that come after only ``param set-default``, which never overrides a value
 that was set, so ours win over both. (MAV_SYS_ID is set after them: it is always instance + 1.)
@@ -46,6 +53,11 @@ SIM_TCP_PORT = 4560  # + instance: the simulator_mavlink link (PX4 is the client
 GCS_UDP_PORT = 18570  # + instance: PX4's GCS MAVLink link binds here
 API_UDP_PORT = 14580  # + instance: PX4's offboard/API MAVLink link binds here
 OTHER_UDP_PORTS = (14280, 13030)  # + instance: the payload and gimbal links bind these
+GCS_REMOTE_PORT = 18470  # + instance: where PX4's GCS link speaks until a partner talks (PX4's own default: 14550)
+API_REMOTE_PORT = 18370  # + instance: where its API link speaks until a partner talks (PX4's own: 14540+N)
+MAVLINK_RC = "px4-rc.mavlink"  # the start-up script (etc/init.d-posix/) that starts PX4's MAVLink links
+_GCS_START = "mavlink start -x -u $udp_gcs_port_local "  # the GCS link's start line, as PX4's script writes it
+_API_REMOTE = "-o $udp_offboard_port_remote"  # the API link's remote port, as PX4's script writes it
 MAX_INSTANCE = 99
 INSTANCE_ENV = "RETURNLINK_PX4_INSTANCE"  # where to start looking for a free instance (a machine shared with others)
 LOCK_FILE = "/tmp/px4_lock-{}"  # PX4's own per-instance server lock: held (fcntl) while a PX4 of that instance runs
@@ -101,7 +113,8 @@ def claim_instance(start: int | None = None) -> tuple[int, socket.socket]:
         except OSError:
             sock.close()
             continue
-        udp = [GCS_UDP_PORT + n, API_UDP_PORT + n, *(p + n for p in OTHER_UDP_PORTS)]
+        udp = [GCS_UDP_PORT + n, API_UDP_PORT + n, *(p + n for p in OTHER_UDP_PORTS), GCS_REMOTE_PORT + n,
+               API_REMOTE_PORT + n]
         if all(port_free(socket.SOCK_DGRAM, p) for p in udp) and not lock_held(n):
             return n, sock
         sock.close()
@@ -119,6 +132,19 @@ def module_names(px4_dir: Path) -> list[str]:
     return sorted(p.name for p in (Path(px4_dir) / "bin").glob("px4-*") if not p.name.endswith(".sh"))
 
 
+def mavlink_rc(text: str, gcs_port: int, api_port: int) -> str | None:
+    """PX4's ``px4-rc.mavlink`` with its GCS link speaking to ``gcs_port`` and its API link to ``api_port`` until a
+    partner talks (``-o``); None if the script has no such lines to change (another PX4 version)."""
+    lines = text.splitlines()
+    gcs = [k for k, ln in enumerate(lines) if ln.startswith(_GCS_START) and " -o " not in ln]
+    api = [k for k, ln in enumerate(lines) if _API_REMOTE in ln]
+    if len(gcs) != 1 or len(api) != 1:
+        return None
+    lines[gcs[0]] += f" -o {gcs_port}"
+    lines[api[0]] = lines[api[0]].replace(_API_REMOTE, f"-o {api_port}")
+    return "\n".join(lines) + "\n"
+
+
 def param_env(params: dict[str, float]) -> dict[str, str]:
     """``PX4_PARAM_<NAME>`` variables for ``params`` (integers written as integers: rcS hands the text to
     ``param set``, which parses an INT32 parameter's value as an integer)."""
@@ -133,9 +159,11 @@ class PX4Process(WorkdirChild):
     """One running PX4: ``start`` it, read ``pid``, ``stop`` it (idempotent). A context manager."""
 
     def __init__(self, px4_dir: Path, instance: int, params: dict[str, float] | None = None,
-                 workdir: Path | None = None) -> None:
+                 workdir: Path | None = None, gcs_port: int | None = None) -> None:
         self.px4_dir = Path(px4_dir)
         self.instance = instance
+        self.gcs_port = GCS_REMOTE_PORT + instance if gcs_port is None else gcs_port
+        self.remote_ports: tuple[int, int] | None = None  # (GCS, API) once laid out with our own script
         self.params = {**DEFAULT_PARAMS, **(params or {})}
         self._own_dir = workdir is None
         self.workdir = Path(tempfile.mkdtemp(prefix=f"returnlink-px4-{instance}-")) if workdir is None else workdir
@@ -158,6 +186,20 @@ class PX4Process(WorkdirChild):
             (bin_dir / "px4-alias.sh").symlink_to(alias.resolve())
         for name in module_names(self.px4_dir):
             (bin_dir / name).symlink_to("px4")
+        self._own_mavlink_rc(bin_dir)
+
+    def _own_mavlink_rc(self, bin_dir: Path) -> None:
+        """Our copy of PX4's MAVLink start-up script beside the module clients (rcS sources it by name from the
+        search path, where ``bin/`` comes before ``etc/init.d-posix``), sending to this run's own ports."""
+        try:
+            text = (self.px4_dir / "etc" / "init.d-posix" / MAVLINK_RC).read_text()
+        except OSError:
+            return
+        api_port = API_REMOTE_PORT + self.instance
+        ours = mavlink_rc(text, self.gcs_port, api_port)
+        if ours is not None:
+            (bin_dir / MAVLINK_RC).write_text(ours)
+            self.remote_ports = (self.gcs_port, api_port)
 
     def environment(self) -> dict[str, str]:
         env = {k: v for k, v in os.environ.items() if not k.startswith("PX4_")}  # nothing of another run's setup

@@ -1,11 +1,12 @@
-"""The README's desk walkthrough of companion mode, run exactly as printed against the real ArduPilot Rover SITL.
+"""The desk walkthrough of companion mode (docs/companion.md), run exactly as printed against the real ArduPilot Rover
+SITL.
 
-The shell block and the Python block are read out of README.md, not copied here: a walkthrough that drifts from the
-code fails this test. The shell lines run in a fresh directory holding the SITL's ``rover.parm``, with the firmware
-and ``returnlink`` on PATH, as the README asks; a line ending in ``&`` is started in the background and stopped by
-its own process id when the test ends (SIGTERM, then SIGKILL: the firmware ignores SIGTERM at times). The Python
-block is the operator; its last line says where the rover stopped, which must be within a few metres inside the
-station's range: where the link came back, not all the way home (issue 28: it stopped 6.6 m inside before).
+The shell block and the Python block are read out of docs/companion.md, not copied here: a walkthrough that drifts from
+the code fails this test. The shell lines run in a fresh directory holding the SITL's ``rover.parm``, with the firmware
+and ``returnlink`` on PATH, as the page asks; a line ending in ``&`` is started in the background and stopped by its own
+process id when the test ends (SIGTERM, then SIGKILL: the firmware ignores SIGTERM at times). The Python block is the
+operator; its last line says where the rover stopped, which must be within a few metres inside the station's range:
+where the link came back, not all the way home (issue 28: it stopped 6.6 m inside before).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from tests.ardurover import firmware
 
 pytestmark = [pytest.mark.firmware, pytest.mark.interop]
 
-README = Path(__file__).resolve().parent.parent / "README.md"
+PAGE = Path(__file__).resolve().parent.parent / "docs" / "companion.md"
 SECTION = "To try it on a desk with the SITL firmware"
 # how far inside the station's range the rover may stop: the return ends at the first place back along the trail
 # the link map vouches for (a cell whose neighbourhood held the link, docs/architecture.md §6), a cell or two inside
@@ -35,12 +36,12 @@ WITHIN_M = 7.5
 
 
 def blocks() -> tuple[list[str], str]:
-    """The walkthrough's shell lines and its Python program, from the README."""
-    text = README.read_text()
+    """The walkthrough's shell lines and its Python program, from its page."""
+    text = PAGE.read_text()
     at = text.index(SECTION)
     shell = re.search(r"```\n(.*?)```", text[at:], re.S)
     program = re.search(r"```python\n(.*?)```", text[at:], re.S)
-    assert shell is not None and program is not None, "the walkthrough's code blocks are missing from README.md"
+    assert shell is not None and program is not None, f"the walkthrough's code blocks are missing from {PAGE}"
     lines = [ln.split("#", 1)[0].strip() if not ln.startswith("printf") else ln.strip()
              for ln in shell.group(1).splitlines()]
     return [ln for ln in lines if ln], program.group(1)
@@ -57,7 +58,7 @@ def stop(proc: subprocess.Popen) -> None:
         proc.wait(5)
 
 
-def test_the_readme_desk_walkthrough_runs_as_printed(tmp_path):
+def test_the_desk_walkthrough_runs_as_printed(tmp_path):
     exe = firmware()
     assert port_free(socket.SOCK_STREAM, 5760) and port_free(socket.SOCK_DGRAM, 14550), \
         "the walkthrough's ports (tcp 5760, udp 14550) are taken: another SITL or ground station is running"
