@@ -3,8 +3,9 @@
 The file is an ordinary scenario (no ``[generate]``; a map world keeps its ``[map]`` table, naming the map
 by its resolved path and its content's digest, with the stations written in the world frame): reading it back
 with ``sim.scenario.parse`` gives the same Scenario, field for field, so ``sim run world.toml --seed N`` flies
-exactly the run ``sim run gen:KIND --seed N`` flew. Floats are written with ``repr`` (the shortest text that reads back as the same double), and the start's
-heading, kept in radians but written in degrees, as the degrees that convert back to the very same radians.
+exactly the run ``sim run gen:KIND --seed N`` flew. Floats are written with ``repr`` (the shortest text that
+reads back as the same double), and the start's heading, kept in radians but written in degrees, as the degrees
+that convert back to the very same radians.
 """
 
 from __future__ import annotations
