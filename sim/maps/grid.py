@@ -33,6 +33,11 @@ UNKNOWN = ("wall", "free")
 DEFAULT_WALL_DB = 8.0  # dB a crossing of a run of solid cells (an interior wall at 2.4 GHz: 3-15 dB)
 DEFAULT_WALL_DB_PER_M = 4.0  # dB per metre of solid cells crossed (rock, concrete, whatever the map never saw into)
 SEGMENT_RADIUS = 0.01  # m: a collision edge's half-thickness (the cell edge itself is the wall's face)
+BODY_FITS = 0.3  # m: an open place is one a robot's centre may reach if it is this far from every solid cell ...
+NEAR_CELL = 0.2  # m: the blocks that question is asked on
+TILE = 8.0  # m: walls enter the physics a tile at a time, as a body comes within a tile of them
+LOOK_EVERY = 10  # steps between looks at where the bodies are (0.2 s: 0.4 m at 2 m/s, a twentieth of a tile)
+BODY_REACH = 0.6  # m: ... and its body touches what lies within this of such places (robot radii are 0.35-0.4 m)
 
 
 @dataclass(frozen=True)
@@ -71,6 +76,7 @@ class Grid:
         padded[1:-1, 1:-1] = solid
         self._flat = padded.ravel()
         self._stride = self.cols + 2
+        self._edges: np.ndarray | None = None
 
     # ----- frames --------------------------------------------------------------------------------------------
     def uv(self, north: np.ndarray | float, east: np.ndarray | float):
@@ -160,11 +166,34 @@ class Grid:
 
     # ----- the robot's walls ---------------------------------------------------------------------------------
     def edges(self) -> np.ndarray:
-        """Every edge between a solid cell and an open one (the map's border too, where off the map is solid),
-        merged into maximal straight runs: rows of (u1, v1, u2, v2) in metres of the grid's frame."""
+        """Every edge between a solid cell and an open one a robot's body can reach (the map's border too, where
+        off the map is solid), merged into maximal straight runs: rows of (u1, v1, u2, v2) in metres of the grid's
+        frame. Worked out once per grid."""
+        if self._edges is None:
+            self._edges = self._edge_runs()
+        return self._edges
+
+    def _edge_runs(self) -> np.ndarray:
+        """``edges``: open cells no body fits near (the slivers between a laser's rays in unknown space, which
+        are most of a real map's edges) are taken as solid first: no robot can touch them. Where a body fits is
+        worked out on blocks of cells about NEAR_CELL wide (any solid cell makes a block solid), which only ever
+        keeps more edges than needed."""
+        from scipy import ndimage
+
+        f = max(1, round(NEAR_CELL / self.res))
+        rows, cols = -(-self.rows // f), -(-self.cols // f)
+        block = np.full((rows * f, cols * f), self.outside_solid, dtype=bool)
+        block[:self.rows, :self.cols] = self.solid
+        coarse = block.reshape(rows, f, cols, f).any(axis=(1, 3))
+        padded = np.pad(~coarse, 1, constant_values=not self.outside_solid)
+        room = ndimage.distance_transform_edt(padded)[1:-1, 1:-1] * (f * self.res)
+        fits = room >= BODY_FITS + f * self.res
+        near = (ndimage.distance_transform_edt(~fits) * (f * self.res) <= BODY_REACH + f * self.res
+                if fits.any() else fits)
+        near = np.repeat(np.repeat(near, f, axis=0), f, axis=1)[:self.rows, :self.cols]
         s = np.zeros((self.rows + 2, self.cols + 2), dtype=bool)
         s[:] = self.outside_solid
-        s[1:-1, 1:-1] = self.solid
+        s[1:-1, 1:-1] = self.solid | ~near
         out = []
         # horizontal edges: between padded rows r and r + 1 (grid line v = r x res), along the columns
         change = s[:-1, 1:-1] != s[1:, 1:-1]
@@ -207,18 +236,77 @@ class GridWorld(World):
     def __init__(self, site: Site, grid: Grid, denied: tuple = (), stations: tuple[Station, ...] = ()) -> None:
         super().__init__((), denied, stations)
         self.site, self.grid = site, grid
+        self.edge_count = 0
+        self._tiles: dict[tuple[int, int], np.ndarray] | None = None  # tile -> its edges, world frame
+        self._added: set[tuple[int, int]] = set()
+        self._where: dict[int, tuple[int, int]] = {}  # body id -> the tile it was in at the last look
+        self._countdown = 0
+        # the walls enter the physics near the bodies that move, a tile at a time: a world asked only about its
+        # radio (the validity check's mean link, a survey) never builds a segment, and a run on a large map
+        # builds only the few thousand along its way
+        self.step = self._step
+
+    def _step(self, dt: float) -> None:
+        self._countdown -= 1
+        if self._countdown <= 0:  # a body crosses at most a few centimetres of a tile between two looks
+            self._countdown = LOOK_EVERY
+            for body in self.space.bodies:
+                x, y = body.position
+                key = (math.floor(x / TILE), math.floor(y / TILE))
+                if self._where.get(id(body)) != key:
+                    self._where[id(body)] = key
+                    self._add_near(key)
+        self.space.step(dt)
+
+    def _add_near(self, key: tuple[int, int]) -> None:
+        """The walls of the tiles around ``key`` (3 x 3: a body in the middle tile is at least a tile from any
+        it has not got)."""
+        if self._tiles is None:
+            self._tiles = self._bucket()
         body = self.space.static_body
+        shapes = []
+        for di in (-1, 0, 1):
+            for dj in (-1, 0, 1):
+                tile = (key[0] + di, key[1] + dj)
+                if tile in self._added:
+                    continue
+                self._added.add(tile)
+                for a, b, c, d in self._tiles.get(tile, np.zeros((0, 4))).tolist():
+                    seg = pymunk.Segment(body, (a, b), (c, d), SEGMENT_RADIUS)
+                    seg.collision_type = WALL
+                    seg.friction = 0.3
+                    shapes.append(seg)
+        if shapes:
+            self.space.add(*shapes)
+            self.edge_count += len(shapes)
+
+    def _bucket(self) -> dict[tuple[int, int], np.ndarray]:
+        """The map's edges in the world frame, by the tile of their midpoint (an edge is at most a map's width
+        long: a long one sits in its midpoint's tile and is added with it; a body reaches it within a tile of
+        that only if it is shorter than a tile, so long ones are split first)."""
+        grid = self.grid
         e = grid.edges()
         n1, e1 = grid.world_of_uv(e[:, 0], e[:, 1])
         n2, e2 = grid.world_of_uv(e[:, 2], e[:, 3])
-        shapes = []
-        for a, b, c, d in zip(n1.tolist(), e1.tolist(), n2.tolist(), e2.tolist(), strict=True):
-            seg = pymunk.Segment(body, (a, b), (c, d), SEGMENT_RADIUS)
-            seg.collision_type = WALL
-            seg.friction = 0.3
-            shapes.append(seg)
-        self.space.add(*shapes)
-        self.edge_count = len(shapes)
+        seg = np.stack([n1, e1, n2, e2], axis=1)
+        parts = np.maximum(1, np.ceil(np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]) / (TILE / 2)))
+        pieces = []
+        for k in np.unique(parts).astype(int).tolist():  # split each long edge into pieces under half a tile
+            sel = seg[parts == k]
+            for j in range(k):
+                a, b = j / k, (j + 1) / k
+                d = sel[:, 2:] - sel[:, :2]
+                pieces.append(np.concatenate([sel[:, :2] + d * a, sel[:, :2] + d * b], axis=1))
+        seg = np.concatenate(pieces) if pieces else np.zeros((0, 4))
+        ti = np.floor((seg[:, 0] + seg[:, 2]) / 2 / TILE).astype(np.int64)
+        tj = np.floor((seg[:, 1] + seg[:, 3]) / 2 / TILE).astype(np.int64)
+        order = np.lexsort((tj, ti))
+        seg, ti, tj = seg[order], ti[order], tj[order]
+        cut = np.flatnonzero((np.diff(ti) != 0) | (np.diff(tj) != 0)) + 1
+        starts = np.concatenate([[0], cut])
+        ends = np.concatenate([cut, [len(seg)]])
+        return {(int(ti[a]), int(tj[a])): seg[a:b] for a, b in zip(starts.tolist(), ends.tolist(), strict=True)
+                if b > a}
 
     def ranges(self, x: float, y: float, angles: np.ndarray, reach: float) -> np.ndarray:
         return self.grid.ranges(x, y, angles, reach)

@@ -38,12 +38,14 @@ SPEED = 1.0  # m/s: the operator's speed, the generated office's
 GOAL_SPAN = 4.0  # m: goals lie AFTER_DEATH to AFTER_DEATH + GOAL_SPAN metres into the dead stretch
 START_REACH = 10.0  # m: how far from the station the robot may start, if the station stands where it cannot
 REDRAWS = 50
-# m of clearance a map route keeps beyond the generated worlds' (sim.worlds.check.CLEARANCE): a map's walls are
-# where a laser saw them, give or take a cell, and the scripted operator steers by an estimate a few decimetres
-# behind the robot. Measured on test doors: with no extra room the drive touched a 1.2 m door's jamb in 16 of 16
-# runs, with 0.25 m a 2 m door's in 3 of 16, with 0.35 m a 2.4 m door's in none of 16.
+# m of clearance a map route keeps beyond the generated worlds' (sim.worlds.check.CLEARANCE) where it turns
+# sharply (within TURN_ROOM_M of a corner of more than TURN_DEG): the scripted operator steers by an estimate a few
+# decimetres behind the robot and turns late, and at a corner into a door that is a jamb. Measured on test
+# doors: with no extra room the drive touched a 1.2 m door's jamb in 16 of 16 runs, with 0.25 m a 2 m door's in 3
+# of 16, with 0.35 m a 2.4 m door's in none of 16.
 EXTRA_ROOM = 0.35
 NEED = check.CLEARANCE + EXTRA_ROOM
+TURN_ROOM_M = 2.0  # m either side of a sharp corner where NEED holds; elsewhere CLEARANCE does
 TURN_DEG = 30.0  # a corner sharper than this is driven slowly: ...
 SLOW_D = 1.5  # m before it ...
 SLOW = 0.4  # m/s, so the operator turns on the corner instead of overshooting it into a door's jamb
@@ -141,11 +143,11 @@ def plan(site: Site, station: tuple[float, float], power_dbm: float, radio: Radi
     f = max(1, round(PLAN_CELL / grid.res))
     cell = f * grid.res
     room = _blocks_min(clear, f)
-    drivable = room >= NEED
+    drivable = room >= check.CLEARANCE
     rows, cols = np.nonzero(drivable)
     if not len(rows):
-        raise RouteError(f"no place on the map leaves {NEED:.2f} m to every wall (a robot {check.ROBOT_WIDTH:.2f} m "
-                         f"wide with {check.MARGIN + 2 * EXTRA_ROOM:.1f} m of margin)")
+        raise RouteError(f"no place on the map leaves {check.CLEARANCE:.2f} m to every wall (a robot "
+                         f"{check.ROBOT_WIDTH:.2f} m wide with {check.MARGIN} m of margin)")
     cn, ce = _centres(grid, f, rows, cols)
     near = np.hypot(cn - station[0], ce - station[1])
     start = None
@@ -254,6 +256,21 @@ def route_clearance(sc: Scenario) -> float:
     return min(least_clearance(probe, driven), least_clearance(probe, resume))
 
 
+def near_corners(path: list[tuple[float, float]]) -> list[list[tuple[float, float]]]:
+    """The stretches of ``path`` within TURN_ROOM_M of each corner sharper than TURN_DEG (along the path)."""
+    out = []
+    for k in range(1, len(path) - 1):
+        if _turn_deg(path[k - 1], path[k], path[k + 1]) <= TURN_DEG:
+            continue
+        stretch = [path[k]]
+        for nb in (path[k - 1], path[k + 1]):
+            d = math.dist(path[k], nb)
+            t = min(1.0, TURN_ROOM_M / d) if d > 0 else 0.0
+            stretch.append((path[k][0] + (nb[0] - path[k][0]) * t, path[k][1] + (nb[1] - path[k][1]) * t))
+        out.append([stretch[1], stretch[0], stretch[2]])
+    return out
+
+
 def _turn_deg(a, b, c) -> float:
     """How far the way a -> b -> c turns at b (degrees)."""
     h1 = math.atan2(b[1] - a[1], b[0] - a[0])
@@ -316,9 +333,12 @@ def draw(site: Site, station: Station, radio: RadioParams, seed: int, name: str,
         driven = check.steered_path(sc.start[:2], sc.route)
         resume = check.steered_path(driven[-1], sc.resume_route) if sc.resume_route else [driven[-1]]
         room = min(least_clearance(pl, driven), least_clearance(pl, resume))
+        turning = min(least_clearance(pl, part) for part in (*near_corners(driven), *near_corners(resume), [line[0]]))
         problems = list(verdict.problems)
-        if room < NEED - 0.05:
-            problems.append(f"the route passes {room:.2f} m from a wall (needs {NEED:.2f} m)")
+        if room < check.CLEARANCE - 0.05:
+            problems.append(f"the route passes {room:.2f} m from a wall (needs {check.CLEARANCE:.2f} m)")
+        if turning < NEED - 0.05:
+            problems.append(f"the route turns sharply {turning:.2f} m from a wall (needs {NEED:.2f} m there)")
         if problems:
             last = "; ".join(problems)
             continue
