@@ -35,6 +35,9 @@ FRESH_S = 1.0  # s: a position older than this at a signal sample is no position
 MIN_SAMPLES = 20
 EARTH_R = 6378137.0
 PARAMS = ("ref_loss_db", "exponent", "wall_db", "wall_db_per_m")
+# a standard error above this says the drive cannot tell the parameter (a log with little signal: the estimate
+# stays where the fit started, and is reported as not identified)
+IDENTIFIED = {"ref_loss_db": 10.0, "exponent": 1.0, "wall_db": 20.0, "wall_db_per_m": 20.0}
 BOUNDS = {"ref_loss_db": (0.0, 200.0), "exponent": (1.0, 6.0), "wall_db": (0.0, 200.0), "wall_db_per_m": (0.0, 200.0)}
 
 
@@ -87,8 +90,11 @@ def _positions(log, anchor) -> tuple[np.ndarray, np.ndarray, np.ndarray, int | N
 
 def _read(path: Path):
     """(time, message, source system id) of every frame of a .tlog."""
+    import os
+
     from pymavlink import mavutil
 
+    os.environ.setdefault("MAVLINK20", "1")  # a returnlink log is MAVLink 2: pymavlink reads v2 only when told
     try:
         conn = mavutil.mavlink_connection(str(path), dialect="returnlink", robust_parsing=True)
     except OSError as e:
@@ -193,6 +199,10 @@ def fit(s: Samples, prior: RadioParams, power: float) -> Fit:
         sigma, sigma_se = prior.shadowing_db, math.nan
     est = {p: float(beta[k]) for k, p in enumerate(PARAMS)}
     se = {p: float(math.sqrt(max(cov[k, k], 0.0))) if free[k] else math.nan for k, p in enumerate(PARAMS)}
+    for p in PARAMS:  # a spread wider than the parameter could ever need: the drive does not tell it
+        if not se[p] <= IDENTIFIED[p]:
+            se[p] = math.nan
+            est[p] = getattr(prior, p, est[p]) if p in ("ref_loss_db", "exponent") else est[p]
     return Fit(est, se, sigma, sigma_se, resid, s.kind)
 
 
@@ -294,6 +304,10 @@ def write(result: Fit, s: Samples, out: Path) -> list[Path]:
         ax.scatter(s.dist, s.value, s=6, label="measured RSSI", color="tab:blue")
         ax.scatter(s.dist, predicted, s=6, label="fitted model", color="tab:orange")
         ax.set_ylabel("RSSI (dBm)")
+    else:
+        ax.scatter(s.dist, s.value, s=6, label="heartbeat heard (1) or missed (0)", color="tab:blue")
+        ax.scatter(s.dist, s.value - result.residuals, s=6, label="fitted delivery", color="tab:orange")
+        ax.set_ylabel("delivery")
     ax.set_xlabel("distance from the station (m)")
     ax.legend(fontsize=8)
     ax.set_title("site fit: the drive's signal against the fitted radio model", fontsize=9)
