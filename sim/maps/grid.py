@@ -15,7 +15,8 @@ What a real map needs that drawn walls did not (a map holds 10^4-10^6 occupied c
 - *The range sensor's beams* march over the same grid.
 
 Unknown cells are solid (a place nobody mapped is no place to drive or to see through) unless the scenario says
-``unknown = "free"``; the map's surroundings count as unknown.
+``unknown = "free"``; the map's surroundings count as unknown. The exception is a speck: an unknown patch under
+``SPECK_M2`` enclosed by free cells, the floor between two rays of a laser's fan, which is free.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ DEFAULT_WALL_DB = 8.0  # dB a crossing of a run of solid cells (an interior wall
 DEFAULT_WALL_DB_PER_M = 4.0  # dB per metre of solid cells crossed (rock, concrete, whatever the map never saw into)
 SEGMENT_RADIUS = 0.01  # m: a collision edge's half-thickness (the cell edge itself is the wall's face)
 BODY_FITS = 0.3  # m: an open place is one a robot's centre may reach if it is this far from every solid cell ...
+SPECK_M2 = 0.5  # m2: an unknown patch smaller than this, enclosed by free cells, is floor a laser missed
 NEAR_CELL = 0.2  # m: the blocks that question is asked on
 TILE = 8.0  # m: walls enter the physics a tile at a time, as a body comes within a tile of them
 LOOK_EVERY = 10  # steps between looks at where the bodies are (0.2 s: 0.4 m at 2 m/s, a twentieth of a tile)
@@ -217,13 +219,38 @@ def _runs(change: np.ndarray, place) -> np.ndarray:
         if len(line_s) else np.zeros((0, 4))
 
 
+def specks(unknown: np.ndarray, free: np.ndarray, resolution: float) -> np.ndarray:
+    """Unknown cells in small patches (under SPECK_M2) with no occupied or off-map cell beside them: the floor a
+    laser's fan of rays missed between two rays, inside space it saw free. Counted as walls they would make the
+    radio die in an open passage and the robot swerve round nothing."""
+    from scipy import ndimage
+
+    labels, n = ndimage.label(unknown, structure=np.ones((3, 3), dtype=bool))
+    if n == 0:
+        return np.zeros_like(unknown)
+    size = np.bincount(labels.ravel(), minlength=n + 1)
+    # a patch that touches anything but free cells (an occupied cell, the map's edge) is not enclosed by free space
+    touches = np.zeros(n + 1, dtype=bool)
+    grown = ndimage.binary_dilation(unknown, structure=np.ones((3, 3), dtype=bool))
+    ring = grown & ~unknown & ~free
+    if ring.any():
+        near = ndimage.maximum_filter(labels, size=3)
+        touches[np.unique(near[ring])] = True
+    edge = np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])
+    touches[np.unique(edge)] = True
+    small = (size * resolution * resolution < SPECK_M2) & ~touches
+    small[0] = False
+    return small[labels]
+
+
 def grid_of(m: mapfile.OccupancyMap, unknown_free: bool) -> Grid:
-    """The solid grid of map ``m``: occupied cells, and unknown ones unless ``unknown_free``. Cached on the map
-    (a campaign's trials build it once per process)."""
+    """The solid grid of map ``m``: occupied cells, and unknown ones unless ``unknown_free`` (save ``specks``:
+    unknown patches enclosed by free space are floor). Cached on the map (a campaign's trials build it once per
+    process)."""
     key = "_grid_free" if unknown_free else "_grid_wall"
     hit = m.__dict__.get(key)
     if hit is None:
-        solid = m.occupied if unknown_free else (m.occupied | m.unknown)
+        solid = m.occupied if unknown_free else (m.occupied | (m.unknown & ~specks(m.unknown, m.free, m.resolution)))
         hit = Grid(solid, m.resolution, m.origin, outside_solid=not unknown_free)
         object.__setattr__(m, key, hit)
     return hit
