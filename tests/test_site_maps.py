@@ -212,3 +212,16 @@ def test_the_fan_of_rays_counts_the_same_walls_as_the_line_of_sight(building):
     agree = np.mean([r == x[0] for r, x in zip(runs.tolist(), exact, strict=True)])
     assert agree >= 0.95  # a ray a quarter cell off may graze a wall's end the exact line misses
     assert np.median(np.abs(metres - np.array([x[1] for x in exact]))) <= 0.1
+
+
+def test_unknown_specks_inside_free_space_are_floor_and_other_unknown_cells_walls(tmp_path):
+    cells = np.full((40, 40), site_maps.FREE, dtype=np.uint8)
+    cells[:, :2] = site_maps.UNKNOWN  # the unmapped outside, at the map's edge
+    cells[10:12, 10:12] = site_maps.UNKNOWN  # a speck between two laser rays: 1 m2 at 0.5 m cells is not small
+    cells[20, 20] = site_maps.UNKNOWN  # 0.25 m2, enclosed by free cells: floor
+    cells[30, 30] = site_maps.UNKNOWN
+    cells[30, 31] = site_maps.OCCUPIED  # beside an occupied cell: part of a wall's unseen inside
+    grid = Site(str(write_map(tmp_path, cells))).grid()
+    solid = grid.solid[::-1]  # image order again
+    assert not solid[20, 20]
+    assert solid[10, 10] and solid[30, 30] and solid[5, 0]
