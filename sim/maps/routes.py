@@ -233,27 +233,32 @@ def path_to(p: Plan, goal: int) -> list[tuple[int, int]]:
     return cells[::-1]
 
 
-def least_clearance(p: Plan, path: list[tuple[float, float]], step: float = 0.05) -> float:
-    """The least clearance (m to a solid cell's face) along a world-frame polyline, from the distance field."""
+def least_clearance(grid: Grid, clear: np.ndarray, path: list[tuple[float, float]], step: float = 0.05) -> float:
+    """The least clearance (m to a solid cell's face) along a world-frame polyline, from the distance field
+    ``clear`` of ``grid`` (``clearance``)."""
     best = math.inf
     for a, b in zip(path[:-1], path[1:], strict=False):
         n = max(2, int(math.dist(a, b) / step) + 2)
         t = np.linspace(0.0, 1.0, n)
-        u, v = p.grid.uv(a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t)
-        r = np.clip(np.floor(v / p.grid.res).astype(np.intp), 0, p.grid.rows - 1)
-        c = np.clip(np.floor(u / p.grid.res).astype(np.intp), 0, p.grid.cols - 1)
-        best = min(best, float(p.clear[r, c].min()))
+        u, v = grid.uv(a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t)
+        r = np.clip(np.floor(v / grid.res).astype(np.intp), 0, grid.rows - 1)
+        c = np.clip(np.floor(u / grid.res).astype(np.intp), 0, grid.cols - 1)
+        best = min(best, float(clear[r, c].min()))
+    if len(path) == 1:
+        u, v = grid.uv(path[0][0], path[0][1])
+        r = min(max(math.floor(float(v) / grid.res), 0), grid.rows - 1)
+        c = min(max(math.floor(float(u) / grid.res), 0), grid.cols - 1)
+        best = float(clear[r, c])
     return best
 
 
 def route_clearance(sc: Scenario) -> float:
     """The least clearance of a map world's driven route and resume route (m to a solid cell's face)."""
     grid = sc.site.grid()
-    probe = Plan(grid, clearance(grid), np.zeros((0, 0)), 1, np.zeros((0, 0), bool), (0, 0), (0.0, 0.0),
-                 np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, np.intp))
+    clear = clearance(grid)
     driven = check.steered_path(sc.start[:2], sc.route)
     resume = check.steered_path(driven[-1], sc.resume_route) if sc.resume_route else [driven[-1]]
-    return min(least_clearance(probe, driven), least_clearance(probe, resume))
+    return min(least_clearance(grid, clear, driven), least_clearance(grid, clear, resume))
 
 
 def near_corners(path: list[tuple[float, float]]) -> list[list[tuple[float, float]]]:
@@ -332,8 +337,9 @@ def draw(site: Site, station: Station, radio: RadioParams, seed: int, name: str,
         verdict = check.check(sc)
         driven = check.steered_path(sc.start[:2], sc.route)
         resume = check.steered_path(driven[-1], sc.resume_route) if sc.resume_route else [driven[-1]]
-        room = min(least_clearance(pl, driven), least_clearance(pl, resume))
-        turning = min(least_clearance(pl, part) for part in (*near_corners(driven), *near_corners(resume), [line[0]]))
+        room = min(least_clearance(pl.grid, pl.clear, driven), least_clearance(pl.grid, pl.clear, resume))
+        turning = min((least_clearance(pl.grid, pl.clear, part)
+                       for part in (*near_corners(driven), *near_corners(resume))), default=math.inf)
         problems = list(verdict.problems)
         if room < check.CLEARANCE - 0.05:
             problems.append(f"the route passes {room:.2f} m from a wall (needs {check.CLEARANCE:.2f} m)")
