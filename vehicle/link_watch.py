@@ -265,7 +265,11 @@ class LinkWatch:
                 return replace(self, lost=True, contact_since=None), Trigger.LOST
             return self, Trigger.NONE
         if self._regained(t):
-            return replace(self, lost=False), Trigger.REGAINED
+            # the contact that counts from now on began where the window that proved the regain begins (a lucky
+            # packet before it, at the fringe, was not the link coming back)
+            since = self.contact_since
+            assert since is not None
+            return replace(self, lost=False, contact_since=t - self._regain_window(t, since)), Trigger.REGAINED
         return self, Trigger.NONE
 
     def _regained(self, t: float) -> bool:
@@ -281,17 +285,45 @@ class LinkWatch:
         if self.delivery.newest is None:
             return True  # no sequence numbers: unbroken contact is the measure
         q, packets = self.regain_delivery(t)
-        return packets >= REGAIN_PACKETS and q is not None and q >= REGAIN_QUALITY - EPS
+        return (packets >= REGAIN_PACKETS and q is not None and q >= REGAIN_QUALITY - EPS
+                and self._clears_min_quality(t))
+
+    def _clears_min_quality(self, t: float) -> bool:
+        """The delivery over the last LNK_TIMEOUT (what of it the window holds) clears LNK_MIN_Q by two packets (by
+        what it can spare, in a window of fewer than three).
+        Why two: as a window slides over a steady link, the packets lost inside it change by one either way, so a
+        delivery that clears the minimum by less may fall below it a moment later, and LOST would follow the
+        regain on a link that did not change (the property ``test_no_parameters_make_lost_and_regained_alternate``
+        found it: LNK_MIN_Q 0.75, one packet in four lost)."""
+        min_q = self.config.min_quality
+        if min_q <= 0:
+            return True
+        timeout = self.config.timeout
+        at = self.last_heard if self.last_heard is not None else t  # judged when the last packet came, as ``low``
+        q = self.delivery.ratio(at, timeout)
+        inside = self.delivery.count(at, timeout)
+        if q is None or q <= 0 or inside < 1:
+            return False
+        spare = min(2, inside - 1)  # (a window of one or two packets spares what it can: a 1 Hz owner, LNK_TIMEOUT 1.5)
+        return q * (inside - spare) / inside >= min_q - EPS
 
     def regain_delivery(self, t: float) -> tuple[float | None, int]:
-        """The owner's delivery over the regain window at ``t`` and the packets in it: the last LNK_REGAIN_S (at
-        least ``window``, so a zero LNK_REGAIN_S still measures a rate), never reaching back before the contact
-        began (after a loss: before the loss)."""
+        """The owner's delivery over the regain window at ``t`` and the packets in it. The window is the last
+        LNK_REGAIN_S (at least ``window``, so a zero LNK_REGAIN_S still measures a rate), stretched back to hold
+        REGAIN_PACKETS packets when the owner sends slower than that (a ground station idling at its 1 Hz
+        heartbeat), and never reaching back before the contact began (after a loss: before the loss)."""
         since = self.contact_since
         if since is None:
             return None, 0
-        w = max(0.0, min(t - since, max(self.config.regain_s, self.config.window)))
+        w = self._regain_window(t, since)
         return self.delivery.ratio(t, w), self.delivery.count(t, w)
+
+    def _regain_window(self, t: float, since: float) -> float:
+        w = max(self.config.regain_s, self.config.window)
+        arrivals = self.delivery.arrivals
+        if len(arrivals) >= REGAIN_PACKETS:
+            w = max(w, t - min(ta for ta, _ in arrivals[-REGAIN_PACKETS:]))
+        return max(0.0, min(t - since, w))
 
     def regaining(self, t: float) -> bool:
         """Lost, but the owner is heard well again at ``t`` (delivery over ``window`` good): LINK_REGAINED is
