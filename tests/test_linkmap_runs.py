@@ -86,3 +86,16 @@ def test_where_the_stations_range_shrank_lnk_map_seek_looks_on_and_zero_stays():
     assert m_seek["regained_by"] == "return" and m_seek["collisions"] == 0
     default = runs[None][1]
     assert default["link_regained_s"] == m_seek["link_regained_s"]  # seeking is the default
+
+
+def test_a_seek_ends_where_another_station_is_heard():
+    # handover, rover, seed 5: alpha (the owner) falls silent 58 m out, bravo is heard from 80 m. The return reaches
+    # the place the map vouched for without alpha's link and would seek on back along the trail (by default): 44.6 m
+    # back to alpha's dead station, away from bravo, had bravo's traffic not ended the seek (measured, the check
+    # removed). It ends where it began, 12.8 m back, and bravo's takeover is granted after it
+    run = Run(load("handover"), "rover", 5).run()
+    m = outputs.compute(run)
+    first = run.blocks[0]
+    assert first.command == "RETURN_TO_LINK" and first.reason == "COMPLETED"
+    assert first.distance < 20.0, f"sought on {first.distance:.1f} m with bravo heard"
+    assert m["collisions"] == 0 and not m["failures"]
