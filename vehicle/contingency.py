@@ -107,6 +107,7 @@ class ReturnDriver:
         self.way: Way | None = None
         self.way_chain: int | None = None
         self.saw_loss = False  # the running block has run with the owner's link lost
+        self.heard_again = False  # ... and heard the owner again since: it approaches (RTL_APPROACH_SPD) to its end
 
     def stand_down(self) -> None:
         """An operator lease is current: no block runs."""
@@ -126,12 +127,16 @@ class ReturnDriver:
         fresh = self.service is None or self.index != cur.index
         linkmap = v.linkmap
         if fresh:
-            self.saw_loss = False
+            self.saw_loss = self.heard_again = False
         elif self.deferred(cur, link_lost) and linkmap.reliable(x, y):
             # heard again short of the place the map vouches for, and now there: the return ends here
             v.apply(v.book.regained_here(t))
             return 0.0, 0.0
         self.saw_loss = self.saw_loss or link_lost
+        # from the first owner packet heard again, not only while packets keep coming: at a fringe they come with
+        # gaps longer than LNK_GOOD_S, and a return that sped up in each gap met the regain at full speed (open rover
+        # seed 4: back to 1.96 m/s when LINK_REGAINED came, 3.1 m driven from the regain window's start)
+        self.heard_again = self.heard_again or book.link.heard_again(t)
         try:
             if fresh:
                 resume = None
@@ -139,11 +144,11 @@ class ReturnDriver:
                     resume = self.way.resumed((x, y), self.way.length)
                 step = start_block(cur.block, x, y, t, trail, v.params, link_lost, outbound_speed, linkmap, resume,
                                    free=free, yaw=yaw, regaining=book.link.regaining(t),
-                                   approach=book.link.heard_again(t))
+                                   approach=self.heard_again)
             else:
                 step = step_block(self.service, x, y, yaw, t, trail, v.params, link_lost, outbound_speed,
                                   slipping=estimator.slipping, linkmap=linkmap, regaining=book.link.regaining(t),
-                                  free=free, approach=book.link.heard_again(t))
+                                  free=free, approach=self.heard_again)
         except Exception as e:  # noqa: BLE001 - the return runs when nobody can restart the vehicle
             return self._fault(cur.index, e, t)
         if fresh:
