@@ -510,8 +510,11 @@ class AutopilotDriver:
         return True
 
     def _zero_target(self) -> None:
-        """A zero velocity and turn-rate target (ArduPilot, GUIDED): the rover brakes to a stand."""
+        """A zero velocity and turn-rate target (ArduPilot, GUIDED; PX4, Offboard): the rover brakes to a stand."""
         assert self.enc is not None
+        if self.rules is PX4Rules:
+            self._px4_target(0.0, 0.0)
+            return
         mask = 0b0000_0101_1100_0111  # as ``_target``: velocity and yaw rate used, all zero
         self.send_message(self.enc.set_position_target_local_ned_encode(
             0, self.seen.sysid, self.seen.compid, apm.MAV_FRAME_BODY_NED, mask, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0))
