@@ -50,7 +50,14 @@ def test_the_companion_rests_inside_a_hard_edge_with_link_regained_beside_the_fi
     claim_and_arm(fw, owner)
     owner.reach = lambda: fw.distance() < R
     owner.velocity = (2.0, 0.0)
-    pump([owner, fw], 40, lambda: fw.distance() >= R + 1.0, "the rover out of the radio's range")
+    outbound = 0.0
+
+    def out_of_range() -> bool:
+        nonlocal outbound
+        outbound = max(outbound, fw.speed)
+        return fw.distance() >= R + 1.0
+
+    pump([owner, fw], 40, out_of_range, "the rover out of the radio's range")
     owner.velocity = (0.0, 0.0)  # the stick let go: zero targets, heard again once back in range
     pump([owner, fw], 30, lambda: fw.mode == GUIDED and fw.distance() < R, "the return back into the range")
     fastest = 0.0
@@ -64,8 +71,8 @@ def test_the_companion_rests_inside_a_hard_edge_with_link_regained_beside_the_fi
     pump([owner, fw], 3)
     rest = fw.distance()
     reasons = [e.reason for e in owner.gs.events]
-    print(f"rest {rest:.2f} m from home, the edge at {R:g} m; fastest back inside the range {fastest:.2f} m/s; "
-          f"{reasons}")
+    print(f"rest {rest:.2f} m from home, the edge at {R:g} m; fastest back inside the range {fastest:.2f} m/s, "
+          f"out {outbound:.2f} m/s; {reasons}")
     assert "LINK_REGAINED" in reasons
     assert R - 3.0 <= rest <= R, f"rests {rest:.2f} m from home, the edge at {R:g} m"
     assert fw.mode == HOLD

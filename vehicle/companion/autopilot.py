@@ -17,7 +17,8 @@ target 3 s after the last one, which makes the stream a dead-man: a companion th
 that stops. Position targets never time out, so none is ever sent. On ``release`` it brakes and then switches to
 HOLD, unless someone else already chose a mode: Rover's HOLD sets the throttle to zero and lets the rover roll
 (beside the firmware's own physics, 3.2 m from 1.9 m/s), so the companion first streams zero-velocity targets, which
-the speed controller brakes to at its deceleration limit, until the rover stands (DESIGN §6.2). While engaged, a
+the speed controller brakes to at its deceleration limit, until the rover stands (DESIGN §6.2; PX4 goes to Hold at
+once, see ``PX4Rules.brakes``). While engaged, a
 mode change it did not ask for (the pilot's RC switch, the autopilot's own failsafe, a ground station) is reported
 by ``tick``: the return ends rather than fight the pilot.
 
@@ -127,8 +128,10 @@ class PX4Rules:
     streams = px4.STREAMS
     gcs_sysid_params: tuple[str, ...] = ()  # PX4 counts any GCS-type HEARTBEAT: no system id to match
     stop_holds = True  # the dead-man's stop: Hold (a stream of stops would also keep a dead owner's Offboard alive)
-    brakes = False  # a return released goes to Hold at once (PX4's rover Hold brakes; not measured against a zero
-    # Offboard setpoint beside PX4 yet)
+    brakes = False  # a return released goes to Hold at once. Measured beside PX4 (our plant, tunnel seeds 1-3, from
+    # 1 m/s): zero Offboard setpoints until the rover stood, then Hold, stopped in 0.33-0.34 m, Hold at once in
+    # 0.35-0.36 m; but with them the real-PX4 run of tests/test_px4_companion.py lost the link a second time after the
+    # operator resumed (not yet understood), so Hold stays for 2 cm
     mode_name = staticmethod(px4.mode_name)
     set_mode = staticmethod(px4.set_mode)
     param_value = staticmethod(px4.param_value)
