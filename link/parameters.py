@@ -24,7 +24,8 @@ class ParamSpec:
 
 SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("LNK_TIMEOUT", 3.0, 0.5, 120.0, "s", "owner silent this long -> COMMS_LOST"),
-    ParamSpec("LNK_REGAIN_S", 1.0, 0.0, 10.0, "s", "owner heard continuously this long -> LINK_REGAINED"),
+    ParamSpec("LNK_REGAIN_S", 1.0, 0.0, 10.0, "s",
+              "owner heard again this long, delivering at least 80 % of its packets over it -> LINK_REGAINED"),
     ParamSpec("LNK_GOOD_S", 1.5, 0.1, 10.0, "s", "a crumb is link-good if the owner was heard within this"),
     ParamSpec("RTL_MAX_DISP", 50.0, 1.0, 10000.0, "m", "max displacement of one return block"),
     ParamSpec("RTL_MAX_TIME", 300.0, 0.0, 3600.0, "s", "a return block gives up after this (0 = no limit)"),
@@ -51,15 +52,21 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("LNK_MAP_OBS", 3, 1, 1000, "", "observations (0.5 s looks) before a cell can count as reliable",
               integer=True),
     ParamSpec("LNK_MAP_MARGIN", 0.3, 0.0, 0.9, "",
-              "a reliable cell's delivery lower bound exceeds LNK_MIN_Q by this"),
-    ParamSpec("LNK_MAP_SEEK", 0.0, 0.0, 1000.0, "m",
-              "at the map's place with the link still down, go on back along the trail this far (0 = stay)"),
+              "a reliable cell's delivery lower bound exceeds LNK_MIN_Q by this, and meets the regain's 80 % "
+              "whatever this is"),
+    ParamSpec("LNK_MAP_SEEK", 1000.0, 0.0, 1000.0, "m",
+              "at the map's place with the link still down, go on back along the trail this far, at "
+              "RTL_APPROACH_SPD and within the block's displacement and time (0 = stay)"),
     ParamSpec("LNK_HOLD_S", 1.0, 0.0, 10.0, "s",
               "companion: the owner driving the autopilot with setpoints in GUIDED silent this long (and longer "
               "than its longest gap between packets of the last 5 s) -> the drive is stopped (0 = never)"),
     ParamSpec("RTL_BODY_R", 0.0, 0.0, 5.0, "m",
               "the robot's footprint radius: a return keeps its body a few cm off what the range sensor sees "
               "now, whatever the estimate's error (0 = unknown, not kept)"),
+    ParamSpec("RTL_APPROACH_SPD", 1.0, 0.0, 5.0, "m/s",
+              "from the first owner packet heard again during a return, and while seeking past the link map's place, "
+              "the return drives no faster than this, so the regain window and the braking end close to where the "
+              "link came back (0 = no slowing)"),
 )
 BY_NAME = {s.name: s for s in SPECS}
 

@@ -31,7 +31,13 @@ class FakeAutopilot:
         self.mode, self.armed = MANUAL, False
         self.x = self.y = self.yaw = 0.0
         self.speed = self.yaw_rate = 0.0
+        self.target_speed = 0.0
         self.target_at = -math.inf
+        # how the speed follows (m/s^2; None: at once): toward a GUIDED target (``brake``), and with none, in HOLD
+        # or any mode that does not drive (``roll``): ArduPilot Rover's HOLD sets the throttle to zero and the rover
+        # rolls on, so a roll far below the brake is a rover that coasts
+        self.brake: float | None = None
+        self.roll: float | None = None
         self.ekf_ok = True
         self.silent = False  # stops answering and reporting (a cut cable)
         self.received: list = []  # every message the companion sent, in order
@@ -61,7 +67,9 @@ class FakeAutopilot:
             elif kind == "COMMAND_LONG":
                 self._ack(m, apm.MAV_RESULT_ACCEPTED)
             elif kind == "SET_POSITION_TARGET_LOCAL_NED" and self.mode == GUIDED:
-                self.speed, self.yaw_rate, self.target_at = m.vx, m.yaw_rate, t
+                self.target_speed, self.yaw_rate, self.target_at = m.vx, m.yaw_rate, t
+                if self.brake is None:
+                    self.speed = m.vx
             elif kind in ("PARAM_REQUEST_READ", "PARAM_SET"):
                 name = m.param_id if isinstance(m.param_id, str) else m.param_id.decode()
                 if kind == "PARAM_SET" and name in self.params:
@@ -83,7 +91,14 @@ class FakeAutopilot:
 
     def step(self, t: float, dt: float) -> list[bytes]:
         """Physics and reports for ``dt``; the frames it sends now."""
-        if not self._drives(t):
+        if self._drives(t):
+            if self.brake is not None:
+                step = self.brake * dt
+                self.speed += max(-step, min(step, self.target_speed - self.speed))
+        elif self.roll is not None:
+            self.speed = math.copysign(max(0.0, abs(self.speed) - self.roll * dt), self.speed)
+            self.yaw_rate = 0.0
+        else:
             self.speed = self.yaw_rate = 0.0
         self.yaw += self.yaw_rate * dt
         self.x += self.speed * math.cos(self.yaw) * dt

@@ -6,7 +6,8 @@ the code fails this test. The shell lines run in a fresh directory holding the S
 and ``returnlink`` on PATH, as the page asks; a line ending in ``&`` is started in the background and stopped by its own
 process id when the test ends (SIGTERM, then SIGKILL: the firmware ignores SIGTERM at times). The Python block is the
 operator; its last line says where the rover stopped, which must be within a few metres inside the station's range:
-where the link came back, not all the way home (issue 28: it stopped 6.6 m inside before).
+where the link came back, not all the way home (issue 28: it stopped 6.6 m inside before; issue 38: 6.1 m inside,
+HOLD letting the rover roll).
 """
 
 from __future__ import annotations
@@ -29,10 +30,12 @@ pytestmark = [pytest.mark.firmware, pytest.mark.interop]
 
 PAGE = Path(__file__).resolve().parent.parent / "docs" / "companion.md"
 SECTION = "To try it on a desk with the SITL firmware"
-# how far inside the station's range the rover may stop: the return ends at the first place back along the trail
-# the link map vouches for (a cell whose neighbourhood held the link, docs/architecture.md §6), a cell or two inside
-# the range's edge, then brakes (measured: 6.0 and 6.2 m)
-WITHIN_M = 7.5
+# how far inside the station's range the rover may stop (DESIGN §6.2: between R - 3 m and R): the return slows to
+# RTL_APPROACH_SPD at the first packet heard again, LINK_REGAINED comes over the regain window, and the companion
+# brakes with zero targets before HOLD (measured: 2.8 m inside, at rest 17.2 m from home; before the approach speed
+# and the brake 6.0, 6.1 and 6.2 m inside, HOLD rolling the rover on). The contract's 3 m plus 0.5 m for the
+# firmware's own run-to-run spread (it is not bit-repeatable), so the test says what is guaranteed, not one run.
+WITHIN_M = 3.5
 
 
 def blocks() -> tuple[list[str], str]:

@@ -285,3 +285,77 @@ def test_regaining_while_contact_is_back_but_the_regain_not_yet_due():
         if trig is Trigger.REGAINED:
             break
     assert trig is Trigger.REGAINED and not w.regaining(w.last_heard)
+
+
+def test_one_lost_packet_at_the_fringe_does_not_restart_the_regain():
+    """A 4 Hz stream heard again after an outage, one packet of it lost half a second in: LINK_REGAINED comes
+    LNK_REGAIN_S after the link came back, as it would have without the loss (delivery over the window 4 of 5),
+    not LNK_REGAIN_S after the lost packet (issue 38: a run of good packets restarted at every loss)."""
+    def run(lose: set[int]) -> float:
+        st = Station(LinkWatch(cfg()))
+        for n in range(0, 1000):  # 4 Hz for 5 s, silent until 10 s, then 4 Hz again
+            t = n * 0.02
+            if n % 12 == 0 and not 250 <= n < 500:
+                k = n // 12
+                st.send(t, k not in lose)
+            elif n % 12 == 0:
+                st.send(t, False)
+            st.step(t)
+        assert [trig for _, trig in st.triggers] == [Trigger.LOST, Trigger.REGAINED]
+        return st.triggers[1][0]
+
+    first_back = 504 * 0.02  # the first packet after the outage (n = 504, k = 42)
+    clean = run(set())
+    assert first_back + 1.0 - 1e-9 <= clean <= first_back + 1.0 + 0.021
+    assert run({44}) == clean  # one lost half a second in (4 of 5 over the window: 0.8)
+
+
+def test_a_regain_needs_the_regain_share_over_the_window():
+    """Two packets of every three (no second of them reaches REGAIN_QUALITY) never make LINK_REGAINED, however
+    long they go on; nine of ten do, LNK_REGAIN_S after they began."""
+    st = Station(LinkWatch(cfg()))
+    st.run(0.0, 5.0)
+    st.run(5.0, 10.0, arrives=lambda k, t: False)
+    st.run(10.0, 30.0, arrives=lambda k, t: k % 3 != 0)
+    assert [trig for _, trig in st.triggers] == [Trigger.LOST]
+    st.run(30.0, 35.0, arrives=lambda k, t: k % 10 != 0)
+    assert [trig for _, trig in st.triggers] == [Trigger.LOST, Trigger.REGAINED]
+    assert st.triggers[1][0] <= 31.0 + 0.1
+
+
+@settings(max_examples=150, deadline=None)
+@given(timeout=st.floats(0.5, 120.0), regain_s=st.floats(0.0, 10.0), contact_gap=st.floats(0.1, 10.0),
+       min_quality=st.floats(0.0, 0.9), interval=st.sampled_from([0.02, 0.04, 0.1, 0.2, 0.25, 0.5, 1.0]),
+       every=st.integers(0, 20), outage=st.floats(0.0, 3.0))
+def test_no_parameters_make_lost_and_regained_alternate(timeout, regain_s, contact_gap, min_quality, interval,
+                                                        every, outage):
+    """Any valid LNK_TIMEOUT, LNK_REGAIN_S, LNK_GOOD_S and LNK_MIN_Q; a steady sender whose silences stay shorter
+    than LNK_TIMEOUT (a link that, by the contract's own measure, is not silent), losing every ``every``-th
+    packet once it is back (0: none): after an outage the watch says LOST once, and REGAINED at most once, and
+    never LOST again while the link stays as it is."""
+    every = 0 if every == 1 else every  # (losing every packet is the outage, not a link)
+    longest = interval * (2 if every else 1)
+    if longest >= timeout - 1e-6:
+        return  # the sender's own silences are LNK_TIMEOUT long: lost by definition
+    watch = LinkWatch(WatchConfig(timeout=timeout, regain_s=regain_s, contact_gap=contact_gap,
+                                  min_quality=min_quality))
+    triggers: list[Trigger] = []
+    dt = 0.02
+    per = round(interval / dt)
+    down_from = round(5.0 / dt)
+    back_at = down_from + round((timeout + outage + 0.5) / dt)
+    end = back_at + round((regain_s + 2 * timeout + 10.0) / dt)
+    step = max(1, min(per, 5))  # a tick every 0.1 s at most between packets (the deadlines hold within it)
+    seq = 0
+    for n in range(0, end, step) if step == per else range(0, end):
+        t = n * dt
+        if n % per == 0:
+            k = n // per
+            if n < down_from or (n >= back_at and not (every and k % every == 0)):
+                watch = watch.heard(t, seq)
+            seq = (seq + 1) % 256
+        watch, trig = watch.step(t)
+        if trig is not Trigger.NONE:
+            triggers.append(trig)
+    assert triggers[:1] == [Trigger.LOST] and triggers in ([Trigger.LOST], [Trigger.LOST, Trigger.REGAINED]), \
+        triggers

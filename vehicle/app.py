@@ -92,6 +92,7 @@ class Vehicle:
         self.linkmap = self.control.linkmap
         self._map_owner: int | None = None  # whose packets the link map counts (a new owner has its own rate)
         self.rssi_report: tuple[float, float] | None = None  # (t, dBm): the radio's last report of the owner's signal
+        self.station_heard_at: float | None = None  # a trusted frame from a station other than the owner, last heard
         self._ticks = 0  # counts the start and the end of every tick: a snapshot belongs to one stretch between
         self._status: Status | None = None
         self._status_tick = -1
@@ -231,6 +232,8 @@ class Vehicle:
     def heard(self, sysid: int, t: float, seq: int | None = None) -> None:
         """A frame from ``sysid`` with MAVLink sequence number ``seq``: the owner's feed the link watch."""
         self.book = self.book.heard(sysid, t, seq)
+        if sysid != self.book.owner:
+            self.station_heard_at = t  # (a seeking return ends on it: a station is there, DESIGN §6.2)
         if sysid == self.book.owner:
             if sysid != self._map_owner:
                 self._map_owner = sysid

@@ -48,6 +48,7 @@ class Onboard(VehiclePort, Protocol):
     notices: list[str]  # announced by the endpoint
     armed: bool
     home: tuple[float, float]
+    station_heard_at: float | None  # a station other than the owner, last heard (trusted frames only)
     estimator: Estimator
     trail: Trail
 
@@ -106,6 +107,7 @@ class ReturnDriver:
         self.way: Way | None = None
         self.way_chain: int | None = None
         self.saw_loss = False  # the running block has run with the owner's link lost
+        self.heard_again = False  # ... and heard the owner again since: it approaches (RTL_APPROACH_SPD) to its end
 
     def stand_down(self) -> None:
         """An operator lease is current: no block runs."""
@@ -125,23 +127,28 @@ class ReturnDriver:
         fresh = self.service is None or self.index != cur.index
         linkmap = v.linkmap
         if fresh:
-            self.saw_loss = False
+            self.saw_loss = self.heard_again = False
         elif self.deferred(cur, link_lost) and linkmap.reliable(x, y):
             # heard again short of the place the map vouches for, and now there: the return ends here
             v.apply(v.book.regained_here(t))
             return 0.0, 0.0
         self.saw_loss = self.saw_loss or link_lost
+        # from the first owner packet heard again, not only while packets keep coming: at a fringe they come with
+        # gaps longer than LNK_GOOD_S, and a return that sped up in each gap met the regain at full speed (open rover
+        # seed 4: back to 1.96 m/s when LINK_REGAINED came, 3.1 m driven from the regain window's start)
+        self.heard_again = self.heard_again or book.link.heard_again(t)
         try:
             if fresh:
                 resume = None
                 if self.way is not None and self.way_chain == cur.chain:
                     resume = self.way.resumed((x, y), self.way.length)
                 step = start_block(cur.block, x, y, t, trail, v.params, link_lost, outbound_speed, linkmap, resume,
-                                   free=free, yaw=yaw, regaining=book.link.regaining(t))
+                                   free=free, yaw=yaw, regaining=book.link.regaining(t),
+                                   approach=self.heard_again)
             else:
                 step = step_block(self.service, x, y, yaw, t, trail, v.params, link_lost, outbound_speed,
                                   slipping=estimator.slipping, linkmap=linkmap, regaining=book.link.regaining(t),
-                                  free=free)
+                                  free=free, approach=self.heard_again)
         except Exception as e:  # noqa: BLE001 - the return runs when nobody can restart the vehicle
             return self._fault(cur.index, e, t)
         if fresh:
@@ -154,6 +161,11 @@ class ReturnDriver:
                 self.reached.append(self.service.items[self.service.item].seq)
             v.book, _ = v.book.issue_sublease(book.current_id)
         self.service = step.state
+        if step.finished is None and step.state.seeking and self._station_heard(t):
+            # seeking past the map's place for the owner's link, and a station is heard here: the link to the
+            # ground is back (a second station of the owner's, as in the handover world), and seeking on would
+            # only drive away from it
+            step = replace(step, finished=ExpireReason.COMPLETED)
         if step.finished is not None:
             st = step.state
             if step.finished is ExpireReason.COMPLETED and 0 <= st.item < len(st.items):
@@ -164,6 +176,10 @@ class ReturnDriver:
                 v.apply(v.book.finish(cur.index, step.finished, t))
             return 0.0, 0.0
         return keep_off(seen, t, x, y, yaw, step.speed, step.yaw_rate, v.params["RTL_BODY_R"], FOLLOWER.max_yaw_rate)
+
+    def _station_heard(self, t: float) -> bool:
+        heard = self.vehicle.station_heard_at
+        return heard is not None and t - heard <= self.vehicle.params["LNK_GOOD_S"]
 
     def deferred(self, cur: ExecutionLease, link_lost: bool) -> bool:
         """A block that halts on regain, has run with the link lost and runs on with it back: LINK_REGAINED came

@@ -15,10 +15,18 @@ Two measurements, both pure functions of the packets heard and the time passed i
   ambiguous, and even a small one may have wrapped), so after a silence of LNK_TIMEOUT (or one long enough to
   wrap at the sender's rate) the window restarts: the outage is already measured by time, and counting it again
   as loss would only delay the regain.
-* **Contact** (``LinkWatch``): when the owner was last heard, since when it has been heard well without a break,
-  and whether the link is lost. ``step(t)`` says LOST (silent for LNK_TIMEOUT, or delivery below LNK_MIN_Q over
-  LNK_TIMEOUT) or REGAINED (heard well, without a break, for LNK_REGAIN_S, by contact that began *after* the loss,
-  so a timeout shorter than LNK_GOOD_S cannot make the two alternate).
+* **Contact** (``LinkWatch``): when the owner was last heard, since when it has been heard without a silence
+  longer than LNK_GOOD_S, and whether the link is lost. ``step(t)`` says LOST (silent for LNK_TIMEOUT, or delivery
+  below LNK_MIN_Q over LNK_TIMEOUT) or REGAINED: contact that began *after* the loss has lasted LNK_REGAIN_S and the
+  owner's delivery over the last LNK_REGAIN_S reaches ``REGAIN_QUALITY`` (DESIGN §6.2). A window, not a run of good
+  packets: one packet lost at the fringe of coverage lowers the share a little instead of restarting the count
+  (issue 38: tunnel rover seed 25 at -20 dBm regained 6.22 s or 10.10 s after a one-tick change). REGAINED also
+  needs the link to pass the very tests LOST applies (heard within LNK_TIMEOUT, delivery over LNK_TIMEOUT not
+  below LNK_MIN_Q): a regain that the next tick would call lost again is not one.
+
+``REGAIN_QUALITY`` is the one number behind both the regain and the link map (``vehicle.linkmap``): the map vouches
+for a place only where its lower bound on delivery meets it, so a return sent to a place the map vouches for is sent
+where a regain can happen.
 
 Deadlines are compared with a tolerance of ``EPS``: in floating point 33.8 - 30.8 is 2.9999999999999964, and a tick
 must not fire one period late because of it.
@@ -37,12 +45,14 @@ if TYPE_CHECKING:
     from vehicle.params import Params
 
 EPS = 1e-6  # s: deadline tolerance (far below the 20 ms tick, far above float error)
-GOOD_QUALITY = 0.8  # delivery at or above this is a good link (crumb tags, continuous contact)
+REGAIN_QUALITY = 0.8  # the owner's delivery over LNK_REGAIN_S at which a lost link is regained; the link map
+# vouches for a place only where its lower bound meets it (one number, here, for both)
+GOOD_QUALITY = REGAIN_QUALITY  # a crumb laid with at least this delivery is link-good (the same standard)
 SEQ_SPACE = 256  # MAVLink's uint8 sequence number
 MAX_WINDOW_PACKETS = 1024  # memory bound of the receiver window (a fast sender shortens the window it covers)
 STUCK_REPEATS = 3  # arrivals of one sequence number, none advancing, after which a sender is unmeasurable
-REGAIN_PACKETS = 3  # good packets a regained contact needs at least: two lucky heartbeats a second apart are not
-# a link (on a working link a ground station's stream brings ten times as many within LNK_REGAIN_S)
+REGAIN_PACKETS = 3  # packets a regain window needs at least: two lucky heartbeats a second apart are not a link
+# (on a working link a ground station's stream brings ten times as many within LNK_REGAIN_S)
 
 
 class Trigger(enum.Enum):
@@ -132,6 +142,11 @@ class Delivery:
         """Whether the window reaches ``window`` seconds back from ``t`` (a ratio over it is a full measure)."""
         return bool(self.arrivals) and self.arrivals[0][0] <= t - window + EPS
 
+    def count(self, t: float, window: float) -> int:
+        """Distinct packets that arrived in the last ``window`` seconds."""
+        since = t - window - EPS
+        return sum(1 for ta, _ in self.arrivals if ta > since)
+
     def ratio(self, t: float, window: float) -> float | None:
         """Share of the packets sent in the last ``window`` seconds that arrived; None when it cannot be told
         (nothing heard yet, or a sender that never advances its sequence number)."""
@@ -212,8 +227,8 @@ class LinkWatch:
 
     config: WatchConfig = field(default_factory=WatchConfig)
     last_heard: float | None = None
-    contact_since: float | None = None  # start of the current run of good, unbroken contact (after any loss)
-    contact_packets: int = 0  # packets heard in that run
+    contact_since: float | None = None  # first packet of the current contact (no silence over LNK_GOOD_S; after
+    # any loss: contact from before it never counts toward a regain)
     lost: bool = False  # LOST fired and REGAINED has not yet
     last_good: float | None = None  # the last packet heard with a good delivery (settles the crumbs' link tags)
     delivery: Delivery = field(default_factory=Delivery)
@@ -225,43 +240,99 @@ class LinkWatch:
     # ----- inputs ------------------------------------------------------------------------------------------
     def heard(self, t: float, seq: int | None = None) -> LinkWatch:
         """A packet from the owner at ``t``. Without ``seq`` (a transport with no sequence numbers) the packet is
-        taken as good; with it, only a measured good delivery keeps contact unbroken."""
+        taken as good; with it, the delivery it measures decides the crumbs' tag and the regain. A poor packet
+        does not break contact: the regain window weighs it (a silence longer than LNK_GOOD_S does)."""
         cfg = self.config
         delivery, q, low = self.delivery, self.quality_heard, self.low
         if seq is not None:
-            delivery = delivery.heard(seq, t, max(cfg.window, cfg.timeout), cfg.timeout)
+            delivery = delivery.heard(seq, t, max(cfg.window, cfg.timeout, cfg.regain_s), cfg.timeout)
             q, q_timeout = delivery.ratios(t, cfg.window, cfg.timeout)
             low = _low(delivery, t, cfg, q_timeout)
-        if not (seq is None or _good(q)):
-            return replace(self, last_heard=t, contact_since=None, contact_packets=0, delivery=delivery,
-                           quality_heard=q, low=low)
         unbroken = (self.contact_since is not None and self.last_heard is not None
                     and t - self.last_heard <= cfg.contact_gap + EPS)
-        return replace(self, last_heard=t, contact_since=self.contact_since if unbroken else t, last_good=t,
-                       contact_packets=self.contact_packets + 1 if unbroken else 1,
-                       delivery=delivery, quality_heard=q, low=low)
+        good = seq is None or _good(q)
+        return replace(self, last_heard=t, contact_since=self.contact_since if unbroken else t,
+                       last_good=t if good else self.last_good, delivery=delivery, quality_heard=q, low=low)
 
     def step(self, t: float) -> tuple[LinkWatch, Trigger]:
         """Evaluate the deadlines at ``t``: LOST, REGAINED or nothing."""
         last = self.last_heard
         if last is None:
             return self, Trigger.NONE
-        cfg = self.config
-        age = t - last
         if not self.lost:
-            if age >= cfg.timeout - EPS or self.low:
+            if t - last >= self.config.timeout - EPS or self.low:
                 # contact from before the loss never counts toward the regain
-                return replace(self, lost=True, contact_since=None, contact_packets=0), Trigger.LOST
+                return replace(self, lost=True, contact_since=None), Trigger.LOST
             return self, Trigger.NONE
-        if (self.contact_since is not None and age <= cfg.contact_gap + EPS
-                and t - self.contact_since >= cfg.regain_s - EPS
-                and (self.delivery.newest is None or self.contact_packets >= REGAIN_PACKETS)):
-            return replace(self, lost=False), Trigger.REGAINED
+        if self._regained(t):
+            # the contact that counts from now on began where the window that proved the regain begins (a lucky
+            # packet before it, at the fringe, was not the link coming back)
+            since = self.contact_since
+            assert since is not None
+            return replace(self, lost=False, contact_since=t - self._regain_window(t, since)), Trigger.REGAINED
         return self, Trigger.NONE
 
+    def _regained(self, t: float) -> bool:
+        """Lost, and since: contact for LNK_REGAIN_S, still alive (heard within LNK_GOOD_S and LNK_TIMEOUT, not
+        low), whose delivery over the regain window (``regain_delivery``) reaches REGAIN_QUALITY."""
+        cfg = self.config
+        since, last = self.contact_since, self.last_heard
+        if since is None or last is None or t - since < cfg.regain_s - EPS:
+            return False
+        age = t - last
+        if age > cfg.contact_gap + EPS or age >= cfg.timeout - EPS or self.low:
+            return False
+        if self.delivery.newest is None:
+            return True  # no sequence numbers: unbroken contact is the measure
+        q, packets = self.regain_delivery(t)
+        return (packets >= REGAIN_PACKETS and q is not None and q >= REGAIN_QUALITY - EPS
+                and self._clears_min_quality(t))
+
+    def _clears_min_quality(self, t: float) -> bool:
+        """The delivery over the last LNK_TIMEOUT (what of it the window holds) clears LNK_MIN_Q by two packets (by
+        what it can spare, in a window of fewer than three).
+        Why two: as a window slides over a steady link, the packets lost inside it change by one either way, so a
+        delivery that clears the minimum by less may fall below it a moment later, and LOST would follow the
+        regain on a link that did not change (the property ``test_no_parameters_make_lost_and_regained_alternate``
+        found it: LNK_MIN_Q 0.75, one packet in four lost)."""
+        min_q = self.config.min_quality
+        if min_q <= 0:
+            return True
+        timeout = self.config.timeout
+        at = self.last_heard if self.last_heard is not None else t  # judged when the last packet came, as ``low``
+        q = self.delivery.ratio(at, timeout)
+        inside = self.delivery.count(at, timeout)
+        if q is None or q <= 0 or inside < 1:
+            return False
+        spare = min(2, inside - 1)  # (a window of one or two packets spares what it can: a 1 Hz owner, LNK_TIMEOUT 1.5)
+        return q * (inside - spare) / inside >= min_q - EPS
+
+    def regain_delivery(self, t: float) -> tuple[float | None, int]:
+        """The owner's delivery over the regain window at ``t`` and the packets in it. The window is the last
+        LNK_REGAIN_S (at least ``window``, so a zero LNK_REGAIN_S still measures a rate), stretched back to hold
+        REGAIN_PACKETS packets when the owner sends slower than that (a ground station idling at its 1 Hz
+        heartbeat), and never reaching back before the contact began (after a loss: before the loss)."""
+        since = self.contact_since
+        if since is None:
+            return None, 0
+        w = self._regain_window(t, since)
+        return self.delivery.ratio(t, w), self.delivery.count(t, w)
+
+    def _regain_window(self, t: float, since: float) -> float:
+        w = max(self.config.regain_s, self.config.window)
+        arrivals = self.delivery.arrivals
+        if len(arrivals) >= REGAIN_PACKETS:
+            w = max(w, t - min(ta for ta, _ in arrivals[-REGAIN_PACKETS:]))
+        return max(0.0, min(t - since, w))
+
     def regaining(self, t: float) -> bool:
-        """Lost, but the owner is heard well again without a break at ``t``: LINK_REGAINED is due once the contact
-        has lasted LNK_REGAIN_S."""
+        """Lost, but the owner is heard well again at ``t`` (delivery over ``window`` good): LINK_REGAINED is
+        due once the contact has lasted LNK_REGAIN_S. A return arriving at its target waits for it there."""
+        return self.heard_again(t) and (self.delivery.newest is None or _good(self.quality_heard))
+
+    def heard_again(self, t: float) -> bool:
+        """Lost, and the owner heard again since, within LNK_GOOD_S of ``t``: a return slows to its approach speed
+        (RTL_APPROACH_SPD), so that the regain window and the braking end close to where it came."""
         return (self.lost and self.contact_since is not None and self.last_heard is not None
                 and t - self.last_heard <= self.config.contact_gap + EPS)
 

@@ -15,8 +15,11 @@ where the link holds one moment in three, and loses it again a moment later (iss
 * the mean RSSI of the vehicle's radio there, when the radio reports one.
 
 A place *reliably holds* when it has at least LNK_MAP_OBS observations and the Wilson lower confidence bound on its
-delivery (``Z`` = one-sided 95 %) is above LNK_MIN_Q + LNK_MAP_MARGIN: a lucky packet at the fringe, or a short look
-at a cell, never makes a place reliable, and a long good look makes it so even if a few packets were lost.
+delivery (``Z`` = one-sided 95 %) meets the regain's own threshold (``vehicle.link_watch.REGAIN_QUALITY``; or
+LNK_MIN_Q + LNK_MAP_MARGIN where that is stricter): a lucky packet at the fringe, or a short look at a cell, never
+makes a place reliable, and a long good look makes it so even if a few packets were lost. Why the regain's number
+and not LNK_MIN_Q's (DESIGN §6.2): a place is worth returning to only if LINK_REGAINED can come there; a bound of 0.55
+vouched for places where the regain's 80 % never came (issue 38: building seed 5, 29.8 s to link).
 
 Cost and memory (the map runs in the 50 Hz loop, docs/architecture.md §8): ``at`` is a few float operations and one
 dict lookup when the robot changes cell; ``packet`` is a handful. Memory is bounded by LNK_MAP_CELLS: when a new cell
@@ -37,6 +40,7 @@ from typing import TYPE_CHECKING
 
 from link.linkmap_format import MapCell
 from link.parameters import default
+from vehicle.link_watch import EPS, REGAIN_QUALITY
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
@@ -74,8 +78,9 @@ class MapConfig:
 
     @property
     def threshold(self) -> float:
-        """The lower bound a reliable place must exceed (kept below 1, so a perfect place can reach it)."""
-        return min(0.95, self.min_quality + self.margin)
+        """The lower bound a reliable place must meet: the regain's (``REGAIN_QUALITY``), or LNK_MIN_Q +
+        LNK_MAP_MARGIN where that is stricter (kept below 1, so a perfect place can reach it)."""
+        return max(REGAIN_QUALITY, min(0.95, self.min_quality + self.margin))
 
 
 def wilson_lower(delivered: float, expected: float, z: float = Z) -> float:
@@ -250,7 +255,7 @@ class LinkMap:
 
     def reliable(self, x: float, y: float) -> bool:
         """Whether the map says the link reliably holds at (x, y): enough observations and a lower confidence
-        bound on delivery above LNK_MIN_Q + LNK_MAP_MARGIN (``_holds``)."""
+        bound on delivery that meets ``MapConfig.threshold`` (``_holds``)."""
         return self._holds(self.key(x, y))
 
     def _holds(self, key: tuple[int, int]) -> bool:
@@ -266,7 +271,7 @@ class LinkMap:
         if c is None or c.expected <= 0:
             return False
         if c.observations >= cfg.min_obs:
-            return wilson_lower(c.delivered, c.expected) > cfg.threshold
+            return wilson_lower(c.delivered, c.expected) >= cfg.threshold - EPS
         obs, expected, delivered = 0, 0.0, 0
         i, j = key
         for di in (-1, 0, 1):
@@ -274,7 +279,7 @@ class LinkMap:
                 n = self._cells.get((i + di, j + dj))
                 if n is not None:
                     obs, expected, delivered = obs + n.observations, expected + n.expected, delivered + n.delivered
-        return obs >= cfg.min_obs and wilson_lower(delivered, expected) > cfg.threshold
+        return obs >= cfg.min_obs and wilson_lower(delivered, expected) >= cfg.threshold - EPS
 
     def known(self) -> bool:
         """Whether any place is reliable (a map with none cannot disagree with anything)."""

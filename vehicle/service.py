@@ -106,6 +106,7 @@ class ServiceState:
     stretch_speed: bool = False  # RTL_SPEED=0: drive each stretch at the speed it was driven outbound
     onward: bool = False  # went on past a dead-zone target (docs/architecture.md §6): the next arrival ends the block
     reverse: bool = False  # the navigator is driving the route backward (it lay behind the robot)
+    seeking: bool = False  # gone on past the place the link map vouched for, the link still down: at approach speed
 
 
 RETURN_SPEED_MIN, RETURN_SPEED_MAX = SPEED_RANGE  # m/s: within the robot's limits (MAX_TELEOP_SPEED)
@@ -125,19 +126,22 @@ STUCK_AFTER = 15.0  # s without getting closer to the end of the route
 
 def start(block: ServiceBlock, x: float, y: float, t: float, trail: Trail, params: Params, link_lost: bool,
           outbound_speed: float, linkmap: LinkMap | None = None, resume: Way | None = None,
-          free: FreeSpace | None = None, yaw: float | None = None, regaining: bool = False) -> ServiceStep:
+          free: FreeSpace | None = None, yaw: float | None = None, regaining: bool = False,
+          approach: bool = False) -> ServiceStep:
     """Start a block. ``linkmap``: where the link reliably held (targets, docs/architecture.md §6); ``resume``: the
     way back the previous block of this chain was on, which a RETURN_TO_LINK with the link still lost picks up;
-    ``yaw`` (the robot's heading) and ``regaining`` (as for ``step``): the route is driven from this tick (without
-    ``yaw``, this tick commands a stop and the next drives)."""
+    ``yaw`` (the robot's heading), ``regaining`` and ``approach`` (as for ``step``): the route is driven from this
+    tick (without ``yaw``, this tick commands a stop and the next drives)."""
     items: tuple[PlanItem, ...] = block.payload
     st = ServiceState(items, -1, t, t, (x, y), None, None, 0.0, 0.0, 0.0, math.inf, t)
-    return _next_item(st, x, y, t, trail, params, link_lost, outbound_speed, linkmap, resume, free, yaw, regaining)
+    return _next_item(st, x, y, t, trail, params, link_lost, outbound_speed, linkmap, resume, free, yaw, regaining,
+                      approach)
 
 
 def _next_item(st: ServiceState, x: float, y: float, t: float, trail: Trail, params: Params, link_lost: bool,
                outbound_speed: float, linkmap: LinkMap | None = None, resume: Way | None = None,
-               free: FreeSpace | None = None, yaw: float | None = None, regaining: bool = False) -> ServiceStep:
+               free: FreeSpace | None = None, yaw: float | None = None, regaining: bool = False,
+               approach: bool = False) -> ServiceStep:
     """The block's next item begun: its route planned and, with ``yaw``, driven from this same tick."""
     k = st.item + 1
     if k >= len(st.items):
@@ -177,14 +181,14 @@ def _next_item(st: ServiceState, x: float, y: float, t: float, trail: Trail, par
                and it.command in (NAV_RETURN_TO_LINK, NAV_RETURN_TO_LAUNCH))
     st = replace(st, item=k, item_started_at=t, route=route, path=path, progress=0.0, speed=speed,
                  max_displacement=max_disp, best_remaining=math.inf, last_progress_at=t, stretch_speed=stretch,
-                 onward=False)
+                 onward=False, seeking=False)
     if yaw is None or path is None:
         return ServiceStep(st, 0.0, 0.0, replanned=True)
-    return _first_move(st, x, y, yaw, t, params, link_lost, regaining)
+    return _first_move(st, x, y, yaw, t, params, link_lost, regaining, approach)
 
 
 def _first_move(st: ServiceState, x: float, y: float, yaw: float, t: float, params: Params, link_lost: bool,
-                regaining: bool) -> ServiceStep:
+                regaining: bool, approach: bool = False) -> ServiceStep:
     """A route just planned, driven from the tick it was planned in: the follower's first command on it.
 
     Why: a block that drove only from the next tick started 20 ms behind a baseline that drives at once, 1.5 cm at
@@ -192,7 +196,8 @@ def _first_move(st: ServiceState, x: float, y: float, yaw: float, t: float, para
     telemetry packet is heard or the station waits for the next one 0.25 s later (gen:mine legged seed 118: 5.44 s
     to link against back-up's 5.16; over the mine's seeds 101-180 returnlink was the slower of the two in 18
     trials and the faster in 5)."""
-    cmd = _follow(st, x, y, yaw, FollowerConfig.from_params(params), link_lost, regaining)
+    cmd = _follow(st, x, y, yaw, FollowerConfig.from_params(params), link_lost, regaining,
+                  _approach_cap(st, params, approach))
     if cmd.arrived:  # there already: the next tick's step handles the arrival, as for any route
         return ServiceStep(st, 0.0, 0.0, replanned=True)
     st = replace(st, progress=cmd.progress, reverse=cmd.reverse, best_remaining=cmd.remaining, last_progress_at=t)
@@ -200,11 +205,20 @@ def _first_move(st: ServiceState, x: float, y: float, yaw: float, t: float, para
 
 
 def _follow(st: ServiceState, x: float, y: float, yaw: float, cfg: FollowerConfig, link_lost: bool,
-            regaining: bool) -> FollowCommand:
-    """The follower's command on the block's route from where it got to. With the link down and a way on past the
-    target, the target is a waypoint, not a stop: no easing into it."""
+            regaining: bool, cap: float = 0.0) -> FollowCommand:
+    """The follower's command on the block's route from where it got to, no faster than ``cap`` (0: no cap). With
+    the link down and a way on past the target, the target is a waypoint, not a stop: no easing into it."""
     through = link_lost and not regaining and _may_go_on(st)
-    return follow(st.path, x, y, yaw, st.progress, cruise(st), cfg, st.reverse, through)
+    speed = cruise(st)
+    return follow(st.path, x, y, yaw, st.progress, min(speed, cap) if cap > 0 else speed, cfg, st.reverse, through)
+
+
+def _approach_cap(st: ServiceState, params: Params, approach: bool) -> float:
+    """RTL_APPROACH_SPD while the owner is heard again during a return (``approach``) or while it seeks on past the
+    place the link map vouched for (0: no cap). Why (DESIGN §6.2): LINK_REGAINED comes LNK_REGAIN_S after the first
+    packet at the earliest, and the robot brakes from whatever speed it then has: at 2 m/s that was 2 m of window and
+    1.3 m of braking past the range's edge; at 1 m/s it is 1 m and 0.3 m."""
+    return params["RTL_APPROACH_SPD"] if approach or st.seeking else 0.0
 
 
 def cruise(st: ServiceState) -> float:
@@ -239,7 +253,7 @@ def _go_on(st: ServiceState, x: float, y: float, t: float, params: Params, link_
     if len(nxt.points) < 2 or nxt.length <= params["RTL_ARRIVE_R"]:
         return None
     return replace(st, route=nxt, path=Path(nxt.points), progress=0.0, best_remaining=math.inf,
-                   last_progress_at=t, onward=True)
+                   last_progress_at=t, onward=True, seeking=route.by_map)
 
 
 def _bounded_from(route: Route, center: tuple[float, float], radius: float) -> Route:
@@ -249,11 +263,13 @@ def _bounded_from(route: Route, center: tuple[float, float], radius: float) -> R
 
 def step(st: ServiceState, x: float, y: float, yaw: float, t: float, trail: Trail, params: Params,
          link_lost: bool, outbound_speed: float, slipping: bool = False,
-         linkmap: LinkMap | None = None, regaining: bool = False, free: FreeSpace | None = None) -> ServiceStep:
+         linkmap: LinkMap | None = None, regaining: bool = False, free: FreeSpace | None = None,
+         approach: bool = False) -> ServiceStep:
     """One control tick of the current block. ``slipping``: the estimator finds the odometry inconsistent (wheels
     spinning against a wall), so the estimated progress is not real and the block ends STUCK rather than
     "arriving" at a target it never reached. ``regaining``: the link is lost but the owner is heard well again
-    (LINK_REGAINED is on its way), so a block arriving at its target waits there instead of going on."""
+    (LINK_REGAINED is on its way), so a block arriving at its target waits there instead of going on. ``approach``:
+    the link is lost and the owner heard again since, so the block drives at RTL_APPROACH_SPD at most."""
     it = st.items[st.item]
     max_time = params["RTL_MAX_TIME"]
     if max_time > 0 and t - st.started_at >= max_time:
@@ -263,29 +279,32 @@ def step(st: ServiceState, x: float, y: float, yaw: float, t: float, trail: Trai
     if it.command == NAV_LOITER_TIME:
         if t - st.item_started_at >= it.param1:
             return _next_item(st, x, y, t, trail, params, link_lost, outbound_speed, linkmap, free=free, yaw=yaw,
-                              regaining=regaining)
+                              regaining=regaining, approach=approach)
         return ServiceStep(st, 0.0, 0.0)
     if st.path is None:
         return _next_item(st, x, y, t, trail, params, link_lost, outbound_speed, linkmap, free=free, yaw=yaw,
-                          regaining=regaining)
+                          regaining=regaining, approach=approach)
     if st.onward and not link_lost:
         # past a dead-zone target only for want of the link: it is back (a block that continues on regain)
         return ServiceStep(st, 0.0, 0.0, ExpireReason.COMPLETED)
     cfg = FollowerConfig.from_params(params)
-    cmd = _follow(st, x, y, yaw, cfg, link_lost, regaining)
+    cmd = _follow(st, x, y, yaw, cfg, link_lost, regaining, _approach_cap(st, params, approach))
     if cmd.arrived:
         onward = _go_on(replace(st, progress=cmd.progress), x, y, t, params, link_lost)
         if onward is not None:
             if regaining:  # the owner is heard again: wait here for LINK_REGAINED rather than drive on
                 return ServiceStep(replace(st, progress=cmd.progress), 0.0, 0.0)
             # drive straight on along the way beyond, this same tick: no stop at a place that did not hold
-            go = follow(onward.path, x, y, yaw, 0.0, cruise(onward), cfg, st.reverse, _may_go_on(onward))
+            cap = _approach_cap(onward, params, approach)
+            speed = cruise(onward)
+            go = follow(onward.path, x, y, yaw, 0.0, min(speed, cap) if cap > 0 else speed, cfg, st.reverse,
+                        _may_go_on(onward))
             if go.arrived:
                 return ServiceStep(onward, 0.0, 0.0, replanned=True)
             return ServiceStep(replace(onward, progress=go.progress, reverse=go.reverse), go.speed, go.yaw_rate,
                                replanned=True)
         return _next_item(replace(st, progress=cmd.progress), x, y, t, trail, params, link_lost, outbound_speed,
-                          linkmap, free=free, yaw=yaw, regaining=regaining)
+                          linkmap, free=free, yaw=yaw, regaining=regaining, approach=approach)
     if cmd.remaining < st.best_remaining - 0.2:
         st = replace(st, best_remaining=cmd.remaining, last_progress_at=t)
     elif t - st.last_progress_at >= STUCK_AFTER:

@@ -249,8 +249,10 @@ class Companion:
             self.counters["forwarded"] += 1
             if r.authority is Authority.MODE:
                 self.mode_from_ground, self.held_drive, self.ground_mode_at = True, False, t
+                self.driver.stop_braking()  # the owner chose the mode: the brake after a return is done
             elif m.get_type() in SETPOINTS:
                 self.setpoint_at, self.stopped_at = t, None
+                self.driver.stop_braking()  # the owner drives again: its targets, not the brake's
                 if self.held_drive:
                     self._resume_drive(t)
             return

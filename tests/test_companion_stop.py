@@ -1,0 +1,106 @@
+"""The companion's stop beside ArduPilot Rover's own physics (SITL ``--model rover``), DESIGN §6.2 and issue 38: the
+owner heard with full delivery within R = 18 m of home and not at all beyond, the rover driven straight out at 2 m/s
+by the owner's GUIDED velocity targets until the radio loses it. The operator then lets go of the stick (a joystick at
+rest still streams zero targets at 10 Hz, which the companion refuses once a return holds the lease, but hears). The
+return must end where the link came back: LINK_REGAINED, the rover at rest in HOLD between R - 3 m and R from home.
+
+Measured before the brake and the approach speed: LINK_REGAINED 2.5 m inside the edge, then HOLD rolled the rover
+3.2 m further, to rest 5.7 m inside. With them (twice): back into the range at 2.3 m/s (the firmware's speed loop
+overshoots the 2.0 m/s asked for), slowed by the firmware's own acceleration limit toward the approach speed, the
+regain 2.3 m inside at 1.3 m/s, braked in 0.6 m by zero targets: at rest 2.8-2.9 m inside (15.08, 15.19, 15.11 m
+from home in three runs; 15.17 in a fourth, out at up to 2.45 m/s, back at up to 2.34).
+One firmware per test, on its own instance, stopped by its pid."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from tests.ardurover import Firmware
+from tests.companion_live import CompanionProcess, LiveStation, pump
+from tests.test_companion_firmware import GUIDED, HOLD, claim_and_arm
+
+pytestmark = pytest.mark.firmware
+
+R = 18.0  # m: the owner's radio range (full delivery inside, none beyond)
+
+
+@pytest.fixture()
+def rig(tmp_path):
+    fw = Firmware(tmp_path)
+    owner = LiveStation(255)
+    comp = None
+    try:
+        fw.boot()
+        comp = CompanionProcess(["--autopilot", f"tcp:127.0.0.1:{fw.serial1}", "--gcs",
+                                 f"udpout:127.0.0.1:{owner.port}", "--params", str(tmp_path / "companion.parm")],
+                                tmp_path)
+        pump([owner, fw], 30, lambda: owner.gs.vehicle.status is not None, "the companion's LEASE_STATUS")
+        yield fw, comp, owner
+    finally:
+        if comp is not None:
+            comp.stop()
+        owner.close()
+        fw.stop()
+
+
+def test_the_companion_rests_inside_a_hard_edge_with_link_regained_beside_the_firmwares_physics(rig):
+    fw, comp, owner = rig
+    claim_and_arm(fw, owner)
+    owner.reach = lambda: fw.distance() < R
+    owner.velocity = (2.0, 0.0)
+    outbound = 0.0
+
+    def out_of_range() -> bool:
+        nonlocal outbound
+        outbound = max(outbound, fw.speed)
+        return fw.distance() >= R + 1.0
+
+    pump([owner, fw], 40, out_of_range, "the rover out of the radio's range")
+    owner.velocity = (0.0, 0.0)  # the stick let go: zero targets, heard again once back in range
+    pump([owner, fw], 30, lambda: fw.mode == GUIDED and fw.distance() < R, "the return back into the range")
+    fastest = 0.0
+
+    def stood() -> bool:
+        nonlocal fastest
+        fastest = max(fastest, fw.speed)
+        return fw.mode == HOLD and fw.speed < 0.05
+
+    pump([owner, fw], 30, stood, "the rover to stand in HOLD")
+    pump([owner, fw], 3)
+    rest = fw.distance()
+    reasons = [e.reason for e in owner.gs.events]
+    print(f"rest {rest:.2f} m from home, the edge at {R:g} m; fastest back inside the range {fastest:.2f} m/s, "
+          f"out {outbound:.2f} m/s; {reasons}")
+    assert "LINK_REGAINED" in reasons
+    # DESIGN §6.2's R - 3 m, measured 2.8-2.9 m inside over four runs; 0.5 m more for the firmware's run-to-run
+    # spread (the SITL is not bit-repeatable): the test holds what is guaranteed, the note says what was measured
+    assert R - 3.5 <= rest <= R, f"rests {rest:.2f} m from home, the edge at {R:g} m"
+    assert fw.mode == HOLD
+    # never faster back than out: the firmware's speed loop overshoots the 2.0 m/s asked for both ways (measured
+    # 2.45 m/s out, 2.34 back)
+    assert fastest <= outbound + 0.1, f"back at {fastest:.2f} m/s, out at {outbound:.2f}"
+
+
+def test_silent_from_25_m_and_heard_only_within_12_m_the_companion_seeks_back_and_holds(rig):
+    """The owner heard all the way out, then, 25 m out, only within 12 m of home. The link map vouched for places
+    the link no longer reaches; the return seeks on past them (LNK_MAP_SEEK's default, at RTL_APPROACH_SPD) and is
+    back inside 12 m and standing in HOLD within LNK_REGAIN_S + 4 s of being heard (issue 38: it parked 18.3 m out
+    in HOLD, with no link, for the two minutes the check allowed). Measured: in HOLD 3.3 s after heard, at rest
+    9.98 m from home."""
+    fw, comp, owner = rig
+    claim_and_arm(fw, owner)
+    owner.velocity = (2.0, 0.0)
+    pump([owner, fw], 40, lambda: fw.distance() >= 25.0, "the rover 25 m out")
+    owner.reach = lambda: fw.distance() < 12.0
+    owner.velocity = (0.0, 0.0)  # the stick let go; heard again only within 12 m
+    pump([owner, fw], 90, lambda: fw.mode == GUIDED and fw.distance() < 12.0, "the return back inside 12 m")
+    heard = time.monotonic()
+    pump([owner, fw], 30, lambda: fw.mode == HOLD and fw.speed < 0.05, "the rover to stand in HOLD")
+    took = time.monotonic() - heard
+    rest = fw.distance()
+    reasons = [e.reason for e in owner.gs.events]
+    print(f"in HOLD {took:.1f} s after heard, at rest {rest:.2f} m from home; {reasons}")
+    assert "LINK_REGAINED" in reasons
+    assert rest < 12.0 and took <= 1.0 + 4.0, f"in HOLD {took:.1f} s after heard, {rest:.2f} m from home"
