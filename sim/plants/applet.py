@@ -81,12 +81,13 @@ class AppletPlant(FirmwarePlant):
 
     def __init__(self, scenario: Scenario, kind: str = FIRMWARE_VEHICLE, seed: int | None = None,
                  policy: str = APPLET_POLICY, firmware: Path | None = None, log_path: Path | None = None,
-                 speedup: float = SPEEDUP, script: Path = SCRIPT) -> None:
-        """``script``: the Lua file to carry (the tests give a broken one to see the backstop take over)."""
+                 speedup: float = SPEEDUP, script: Path = SCRIPT, backstop_s: float = BACKSTOP_S) -> None:
+        """``script``: the Lua file to carry (the tests give a broken one to see the backstop take over);
+        ``backstop_s``: the firmware's FS_GCS_TIMEOUT."""
         self._set_scene(scenario, kind, seed, policy, firmware, "firmware binary")
         self.rlnk = applet_params(scenario)
         params = {**firmware_params(policy, self.lnk_timeout, self.robot.max_speed, self.robot.max_accel),
-                  "FS_GCS_TIMEOUT": BACKSTOP_S, "SCR_ENABLE": 1, **self.rlnk}
+                  "FS_GCS_TIMEOUT": backstop_s, "SCR_ENABLE": 1, **self.rlnk}
         self.link = Lockstep(self.world, self.robot, firmware, params, speedup, log_path, scripts=(Path(script),))
         self.air_radio = RadioReport()
 

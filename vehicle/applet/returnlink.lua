@@ -573,9 +573,16 @@ local function record(now)
   start_return(now, n, e)
 end
 
+local function give_way(now)
+  -- someone else has the rover: no new return for this silence (the next loss, after a heartbeat, starts one)
+  local _, seen = heard_age_s(now)
+  ret = { skipped = seen }
+  state = "record"
+end
+
 local function returning(now)
   if pilot_took_over(now) then
-    state = "record"
+    give_way(now)
     return
   end
   local n, e = position()
@@ -623,7 +630,7 @@ end
 
 local function braking(now)
   if pilot_took_over(now) then
-    state = "record"
+    give_way(now)
     return
   end
   if speed_now() > REST_SPEED and now - ret.brake_ms < BRAKE_LIMIT_MS then
@@ -632,9 +639,7 @@ local function braking(now)
   end
   vehicle:set_mode(MODE_HOLD)
   finish(ret.why == "link regained" and 6 or 4, ret.why, now)
-  local _, seen = heard_age_s(now)
-  ret = { skipped = seen } -- this silence has had its return; the next loss starts another
-  state = "record"
+  give_way(now) -- this silence has had its return
   last_n, last_e = nil, nil
 end
 
@@ -651,7 +656,7 @@ function update()
   if not armed then
     if state ~= "record" then
       say(4, "ended: disarmed")
-      state = "record"
+      give_way(now)
     end
     return update, PERIOD_MS
   end
