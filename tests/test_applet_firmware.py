@@ -108,7 +108,9 @@ def test_it_returns_and_stops_where_the_link_came_back_in_the_tunnel(firmware, s
     starts = [t for t, text in texts if text.startswith(f"{TEXT_PREFIX}return:")]
     stops = [(t, text) for t, text in texts if text.startswith(f"{TEXT_PREFIX}stopped:")]
     assert len(starts) == 1 and stops and "link regained" in stops[0][1], texts
-    assert m["link_lost_s"] is not None and 0.0 <= m["reaction_latency_s"] < 0.5
+    # the record's loss is the last frame of any kind the firmware heard from the operator; the applet (like the
+    # firmware's own failsafe) counts heartbeats, sent once a second: its start is up to a second "early" by that
+    assert m["link_lost_s"] is not None and -1.0 - 1e-9 <= m["reaction_latency_s"] < 0.5
     assert m["regained_by"] == "return" and m["link_regained_s"] <= stops[0][0] + 0.2
     assert m["distance_back_m"] > 2.0 and m["collisions_during_return"] == 0
     # at rest in HOLD near where the link came back: no farther back than the regain and the brake take
