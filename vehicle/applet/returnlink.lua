@@ -72,9 +72,15 @@ local DRIVEN_MODES = { [0] = true, [1] = true, [3] = true, [15] = true }
 local PERIOD_MS = 100 -- 10 Hz: crumbs, the link and the return are all updated at this rate
 local REST_SPEED = 0.1 -- m/s: the rover stands
 local BRAKE_LIMIT_MS = 4000 -- the brake gives way to HOLD after this even if the rover is still creeping
-local CARROT_MIN_M = 2.0 -- the target ahead on the trail: beyond the firmware's WP_RADIUS so it never stops
-local CARROT_S = 2.0 -- s of travel at the current speed ahead, if that is farther
-local RETARGET_M = 1.0 -- the target ahead moves on in steps of this
+local CARROT_MIN_M = 1.5 -- the point steered at lies this far ahead along the trail ...
+local CARROT_S = 1.5 -- ... or this many seconds of travel, if that is farther
+local TURN_GAIN = 2.0 -- deg/s of turn rate per degree of heading error
+local TURN_MAX_DEGS = 90 -- the turn rate asked for at most
+local PIVOT_RAD = 0.6 -- heading error beyond which the rover turns on the spot before it drives
+local FLIP_RAD = 2.1 -- heading error (about 120 deg) beyond which it changes between forward and reverse
+local MIN_SPEED = 0.3 -- m/s: the return is never slower than this (before the approach)
+local CRUISE_MOVING = 0.2 -- m/s: the outbound speed is learned only while the rover moves at least this fast
+local CRUISE_DECAY = 0.005 -- m/s per period (0.05 m/s per s) the learned outbound speed falls when driven slower
 local PROGRESS_M = 0.3
 local TURNING_RADS = 0.2 -- turning on the spot at least this fast counts as progress -- remaining trail must shrink by this within RLNK_STUCK_S
 local WINDOW = 32 -- positions remembered since the last kept crumb, for the simplification's check
@@ -344,6 +350,7 @@ end
 local state = "record" -- record, returning, braking
 local ret = {} -- the running return: start, time, loss, progress, our target, reason to stop
 local last_armed = false
+local cruise = 0 -- m/s: the speed the rover was driven at lately (RLNK_SPEED 0 returns at it)
 
 local function say(severity, text)
   gcs:send_text(severity, TAG .. text)
@@ -436,24 +443,6 @@ local function pass_crumbs(n, e)
   window_n, window_e, window_len = {}, {}, 0
 end
 
-local function target_location(n, e)
-  local loc = ahrs:get_origin()
-  if loc == nil then
-    return nil
-  end
-  loc:offset(n, e)
-  return loc
-end
-
-local function same_target(a, b)
-  return a ~= nil and b ~= nil and a:lat() == b:lat() and a:lng() == b:lng()
-end
-
-local function set_speed(s)
-  if s > 0 then
-    vehicle:set_desired_speed(s)
-  end
-end
 
 local function elapsed_s(now)
   return (now - ret.t0) / 1000.0
@@ -480,12 +469,8 @@ local function pilot_took_over(now)
                          elapsed_s(now)))
     return true
   end
-  local target = vehicle:get_target_location()
-  if state == "returning" and ret.target ~= nil and target ~= nil and not same_target(target, ret.target) then
-    say(4, string.format("ended: pilot's target, %.1f s", elapsed_s(now)))
-    return true
-  end
-  if state == "braking" and target ~= nil then
+  -- it drives with turn rates and speeds, which leave no location target: one showing up is someone else's
+  if vehicle:get_target_location() ~= nil then
     say(4, string.format("ended: pilot's target, %.1f s", elapsed_s(now)))
     return true
   end
@@ -520,10 +505,10 @@ local function start_return(now, n, e)
       an, ae = tn[i], te[i]
     end
   end
+  local speed = RLNK_SPEED:get()
   ret = { t0 = now, n0 = n, e0 = e, seen = seen, best = remaining(n, e), best_ms = now, heard_again = nil,
-          contact = nil, target = nil }
+          contact = nil, dir = nil, speed = speed > 0 and speed or math.max(MIN_SPEED, cruise) }
   state = "returning"
-  set_speed(RLNK_SPEED:get())
   if target_i > 0 then
     say(4, string.format("return: silent %.1f s, good %.1f m back", age, back))
   else
@@ -541,8 +526,7 @@ local function regained(now)
   if ret.contact == nil or seen - ret.last_heard > good_ms then
     ret.contact = seen
     if ret.heard_again == nil then
-      ret.heard_again = seen
-      set_speed(RLNK_APPR_SPD:get())
+      ret.heard_again = seen -- from now on at the approach speed (drive)
     end
   end
   ret.last_heard = seen
@@ -557,6 +541,12 @@ local function record(now)
   local n, e = position()
   if n == nil then
     return
+  end
+  local v = speed_now()
+  if v > CRUISE_MOVING then
+    -- the speed driven lately: follows it up at once, down slowly, so the slowing after the owner's last
+    -- command (before the loss is noticed) does not set the return's pace
+    cruise = math.max(v, cruise - CRUISE_DECAY)
   end
   local spacing = RLNK_SPACING:get()
   if last_n == nil or (n - last_n) ^ 2 + (e - last_e) ^ 2 >= spacing * spacing then
@@ -578,6 +568,48 @@ local function give_way(now)
   local _, seen = heard_age_s(now)
   ret = { skipped = seen }
   state = "record"
+end
+
+-- ArduPilot 4.7 renamed ahrs:get_yaw (kept with a warning) to ahrs:get_yaw_rad; older ones have only the first
+local found, yaw_rad_binding = pcall(function() return ahrs.get_yaw_rad end)
+local has_yaw_rad = found and yaw_rad_binding ~= nil
+
+local function yaw_rad()
+  if has_yaw_rad then
+    return ahrs:get_yaw_rad()
+  end
+  return ahrs:get_yaw()
+end
+
+local function wrap_pi(a)
+  return (a + math.pi) % (2 * math.pi) - math.pi
+end
+
+local function drive(n, e, cn, ce, now)
+  -- pure pursuit of the point (cn, ce) ahead on the trail with a turn rate and a speed in GUIDED: backward when the
+  -- trail lies behind the rover (a return never swings a U-turn in a corridor), turning on the spot when the
+  -- heading is far off. The firmware stops the rover by itself 3 s after the last such target (a dead man).
+  local bearing = math.atan(ce - e, cn - n)
+  local yaw = yaw_rad()
+  if ret.dir == nil then
+    ret.dir = math.abs(wrap_pi(bearing - yaw)) > math.pi / 2 and -1 or 1
+  end
+  local err = wrap_pi(bearing - yaw - (ret.dir < 0 and math.pi or 0))
+  if math.abs(err) > FLIP_RAD then
+    ret.dir = -ret.dir
+    err = wrap_pi(err + math.pi)
+  end
+  local rate = math.max(-TURN_MAX_DEGS, math.min(TURN_MAX_DEGS, TURN_GAIN * math.deg(err)))
+  local v = ret.speed
+  if ret.heard_again ~= nil and RLNK_APPR_SPD:get() > 0 then
+    v = math.min(v, RLNK_APPR_SPD:get())
+  end
+  if math.abs(err) > PIVOT_RAD then
+    v = 0
+  else
+    v = v * math.cos(err)
+  end
+  vehicle:set_desired_turn_rate_and_speed(rate, ret.dir * v)
 end
 
 local function returning(now)
@@ -614,18 +646,7 @@ local function returning(now)
     start_braking("stuck", now)
     return
   end
-  -- a new target restarts the firmware's path from where the rover is: moved on only a step at a time, or when
-  -- the rover is about to reach it (a target resent every period would keep the rover from ever speeding up)
-  local moved = ret.cn == nil or (cn - ret.cn) ^ 2 + (ce - ret.ce) ^ 2 >= RETARGET_M * RETARGET_M or
-                (n - ret.cn) ^ 2 + (e - ret.ce) ^ 2 < CARROT_MIN_M * CARROT_MIN_M / 4 or final ~= nil
-  if not moved then
-    return
-  end
-  local loc = target_location(cn, ce)
-  if loc ~= nil and vehicle:set_target_location(loc) then
-    ret.target = vehicle:get_target_location() or loc
-    ret.cn, ret.ce = cn, ce
-  end
+  drive(n, e, cn, ce, now)
 end
 
 local function braking(now)
