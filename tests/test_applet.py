@@ -76,8 +76,14 @@ def test_the_parameter_table_is_documented_alike_in_the_script_and_the_docs():
 
 def test_every_text_fits_one_statustext():
     """ArduPilot splits a longer text in chunks of 50: the ground station (and our record) would see pieces."""
-    for fmt in re.findall(r'say\(\d, (?:string\.format\()?"([^"]+)"', SCRIPT.read_text()):
-        worst = fmt.replace("%.1f", "1234.5").replace("%d", "123").replace("%s", "displacement limit")
+    text = SCRIPT.read_text()
+    reasons = re.findall(r'start_braking\("([^"]+)"', text) + re.findall(r'return \w+, \w+, "([^"]+)"', text)
+    longest = max(reasons, key=len)
+    assert "link regained" in reasons and "max displacement" in reasons
+    formats = re.findall(r'say\(\w+, (?:string\.format\()?"([^"]+)"', text)
+    assert len(formats) >= 8
+    for fmt in formats:  # at their widest: a distance of 9999.9 m, an hour, a mode number of three digits
+        worst = fmt.replace("%.1f", "9999.9").replace("%.0f", "3600").replace("%d", "123").replace("%s", longest)
         assert len(TEXT_PREFIX + worst) <= 50, fmt
 
 

@@ -27,7 +27,7 @@ pytestmark = pytest.mark.firmware
 
 LUAC = "luac5.3"  # ArduPilot's scripting is Lua 5.3: Debian's compiler of that version checks the same grammar
 MANUAL = 0
-# s of the tunnel: the link dies near 46 s, the applet's return brings it back near 60 s
+# s of the tunnel: the link dies near 46 s, the applet's return brings it back near 55 s
 TUNNEL_S = 66.0
 
 

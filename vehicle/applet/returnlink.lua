@@ -12,13 +12,16 @@
     When the owner has been silent for RLNK_TIMEOUT (and the rover is armed in one of the modes listed in
     DRIVEN_MODES below), it switches to GUIDED and drives back along its crumbs toward the nearest place the link
     was good before this loss, and on past it along the trail while the link is still not back (a place that was
-    good once may not be now). From the first heartbeat heard again it slows to RLNK_APPR_SPD; once the owner has
+    good once may not be now). It steers itself (turn rate and speed targets, pure pursuit of a point just ahead on
+    the trail): backward when the trail lies behind, so a rover in a corridor never swings round, at the speed it
+    was driven lately (or RLNK_SPEED); the firmware stops it 3 s after the last target should the script die.
+    From the first heartbeat heard again it slows to RLNK_APPR_SPD; once the owner has
     been heard for RLNK_REGAIN_S it brakes (a zero speed target in GUIDED, because HOLD lets a rover roll) until the
     rover stands, then switches to HOLD. It also stops (brake, then HOLD) at RLNK_MAX_DISP from where the return
     began, after RLNK_MAX_TIME, when the rover makes no progress for RLNK_STUCK_S, or at the trail's start.
     A mode change by anyone else (the pilot's switch, the ground station, the firmware's own failsafe) ends the
-    return at once, as does a GUIDED target it did not set: it never fights the pilot. Every start and stop, with
-    its reason, is a STATUSTEXT beginning "RLNK:".
+    return at once, as does a GUIDED location target (it sets none): it never fights the pilot. Every start and
+    stop, with its reason, is a STATUSTEXT beginning "RLNK:".
 
   Memory
     A crumb is four numbers in four arrays (north, east, time, the link tag and RSSI packed in one), 16 bytes
@@ -81,8 +84,8 @@ local FLIP_RAD = 2.1 -- heading error (about 120 deg) beyond which it changes be
 local MIN_SPEED = 0.3 -- m/s: the return is never slower than this (before the approach)
 local CRUISE_MOVING = 0.2 -- m/s: the outbound speed is learned only while the rover moves at least this fast
 local CRUISE_DECAY = 0.005 -- m/s per period (0.05 m/s per s) the learned outbound speed falls when driven slower
-local PROGRESS_M = 0.3
-local TURNING_RADS = 0.2 -- turning on the spot at least this fast counts as progress -- remaining trail must shrink by this within RLNK_STUCK_S
+local PROGRESS_M = 0.3 -- remaining trail must shrink by this within RLNK_STUCK_S ...
+local TURNING_RADS = 0.2 -- ... or the rover turn on the spot at least this fast (rad/s)
 local WINDOW = 32 -- positions remembered since the last kept crumb, for the simplification's check
 local MSG_RADIO_STATUS = 109
 
@@ -408,7 +411,7 @@ local function carrot(n, e)
     local bn, be = tn[i], te[i]
     if (bn - ret.n0) ^ 2 + (be - ret.e0) ^ 2 > r * r then
       local cn, ce = clip_to_circle(an, ae, bn, be, ret.n0, ret.e0, r)
-      return cn, ce, "displacement limit"
+      return cn, ce, "max displacement"
     end
     local leg = math.sqrt((bn - an) ^ 2 + (be - ae) ^ 2)
     if leg >= ahead then
@@ -451,7 +454,7 @@ end
 local function finish(severity, why, now)
   local n, e = position()
   local back = n and math.sqrt((n - ret.n0) ^ 2 + (e - ret.e0) ^ 2) or 0
-  say(severity, string.format("stopped: %s, %.1f s, %.1f m", why, elapsed_s(now), back))
+  say(severity, string.format("stopped: %s, %.0f s, %.1f m", why, elapsed_s(now), back))
 end
 
 local function start_braking(why, now)
@@ -619,7 +622,7 @@ local function returning(now)
   end
   local n, e = position()
   if n == nil then
-    start_braking("no position estimate", now)
+    start_braking("no position", now)
     return
   end
   if regained(now) then
