@@ -15,9 +15,9 @@
     good once may not be now). It steers itself (turn rate and speed targets, pure pursuit of a point just ahead on
     the trail): backward when the trail lies behind, so a rover in a corridor never swings round, at the speed it
     was driven lately (or RLNK_SPEED); the firmware stops it 3 s after the last target should the script die.
-    From the first heartbeat heard again it slows to RLNK_APPR_SPD; once the owner has
-    been heard for RLNK_REGAIN_S it brakes (a zero speed target in GUIDED, because HOLD lets a rover roll) until the
-    rover stands, then switches to HOLD. It also stops (brake, then HOLD) at RLNK_MAX_DISP from where the return
+    From the first heartbeat heard again it slows to RLNK_APPR_SPD; once a run of heartbeats (at least two, no more
+    than RLNK_GOOD_S apart) has lasted RLNK_REGAIN_S it brakes (a zero speed target in GUIDED, because HOLD lets a
+    rover roll) until the rover stands, then switches to HOLD. It also stops (brake, then HOLD) at RLNK_MAX_DISP from where the return
     began, after RLNK_MAX_TIME, when the rover makes no progress for RLNK_STUCK_S, or at the trail's start.
     A mode change by anyone else (the pilot's switch, the ground station, the firmware's own failsafe) ends the
     return at once, as does a GUIDED location target (it sets none): it never fights the pilot. Every start and
@@ -509,8 +509,8 @@ local function start_return(now, n, e)
     end
   end
   local speed = RLNK_SPEED:get()
-  ret = { t0 = now, n0 = n, e0 = e, seen = seen, best = remaining(n, e), best_ms = now, heard_again = nil,
-          contact = nil, dir = nil, speed = speed > 0 and speed or math.max(MIN_SPEED, cruise) }
+  ret = { t0 = now, n0 = n, e0 = e, seen = seen, best = remaining(n, e), best_ms = now, contact = nil,
+          last_heard = seen, beats = 0, dir = nil, speed = speed > 0 and speed or math.max(MIN_SPEED, cruise) }
   state = "returning"
   if target_i > 0 then
     say(4, string.format("return: silent %.1f s, good %.1f m back", age, back))
@@ -520,23 +520,27 @@ local function start_return(now, n, e)
 end
 
 local function regained(now)
-  -- owner heard again since the loss, heartbeats no more than RLNK_GOOD_S apart, for RLNK_REGAIN_S
+  -- owner heard again since the loss: a run of heartbeats no more than RLNK_GOOD_S apart, the last within
+  -- RLNK_GOOD_S, lasting RLNK_REGAIN_S and holding at least two heartbeats (one stray heartbeat at the fringe,
+  -- followed by silence, is not a link: measured, open world, a return stopped 0.7 m into it on one such)
   local seen = gcs:last_seen():toint()
-  if seen == ret.seen then
-    return false
-  end
   local good_ms = RLNK_GOOD_S:get() * 1000
-  if ret.contact == nil or seen - ret.last_heard > good_ms then
-    ret.contact = seen
-    if ret.heard_again == nil then
-      ret.heard_again = seen -- from now on at the approach speed (drive)
+  if seen ~= ret.seen and seen ~= ret.last_heard then
+    if ret.contact == nil or seen - ret.last_heard > good_ms then
+      ret.contact, ret.beats = seen, 1
+    else
+      ret.beats = ret.beats + 1
     end
+    ret.last_heard = seen
   end
-  ret.last_heard = seen
-  if now - seen > good_ms then
+  if ret.contact ~= nil and now - ret.last_heard > good_ms then
+    ret.contact = nil -- the run broke: back to the return's own speed (drive)
+  end
+  if ret.contact == nil then
     return false
   end
-  return (now - ret.contact) >= RLNK_REGAIN_S:get() * 1000
+  local regain_ms = RLNK_REGAIN_S:get() * 1000
+  return (ret.beats >= 2 or regain_ms <= 0) and now - ret.contact >= regain_ms
 end
 
 -- ----- the states: each runs once a period ------------------------------------------------------------------------
@@ -604,7 +608,7 @@ local function drive(n, e, cn, ce, now)
   end
   local rate = math.max(-TURN_MAX_DEGS, math.min(TURN_MAX_DEGS, TURN_GAIN * math.deg(err)))
   local v = ret.speed
-  if ret.heard_again ~= nil and RLNK_APPR_SPD:get() > 0 then
+  if ret.contact ~= nil and RLNK_APPR_SPD:get() > 0 then -- the owner is being heard again: approach
     v = math.min(v, RLNK_APPR_SPD:get())
   end
   if math.abs(err) > PIVOT_RAD then
