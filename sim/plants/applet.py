@@ -27,11 +27,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from link.plan_items import NAV_RETURN_TO_LINK
 from link.proxy import RadioReport
 from link.radio import LinkState
 from sim.firmware.applet_operator import AppletOperator
 from sim.firmware.lockstep import MODE_NAMES, SPEEDUP, Lockstep
-from sim.firmware.operator import GUIDED
+from sim.firmware.operator import GUIDED, RETURN_MODES
 from sim.plants.firmware import FirmwarePlant, firmware_params
 from sim.policies import APPLET_POLICY, FIRMWARE_VEHICLE
 from sim.scenario import Scenario
@@ -61,16 +62,10 @@ def applet_params(scenario: Scenario) -> dict[str, float]:
         except KeyError:
             continue
     for item in scenario.plan:
-        if isinstance(item, PlanItem) and item.command == _return_to_link() and item.param1 > 0:
+        if isinstance(item, PlanItem) and item.command == NAV_RETURN_TO_LINK and item.param1 > 0:
             out["RLNK_MAX_DISP"] = float(item.param1)
             break
     return out
-
-
-def _return_to_link() -> int:
-    from link.plan_items import NAV_RETURN_TO_LINK
-
-    return NAV_RETURN_TO_LINK
 
 
 class AppletPlant(FirmwarePlant):
@@ -140,8 +135,4 @@ class AppletPlant(FirmwarePlant):
                 out.append((t, shown))
         return out
 
-    @property
-    def return_modes(self) -> frozenset[int]:
-        from sim.firmware.operator import RETURN_MODES
-
-        return RETURN_MODES | {RETURNING}
+    return_modes = RETURN_MODES | {RETURNING}  # what sim.firmware.metrics counts as a return
