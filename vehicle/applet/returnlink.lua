@@ -18,7 +18,8 @@
     From the first heartbeat heard again it slows to RLNK_APPR_SPD; once a run of heartbeats (at least two, no more
     than RLNK_GOOD_S apart) has lasted RLNK_REGAIN_S it brakes (a zero speed target in GUIDED, because HOLD lets a
     rover roll) until the rover stands, then switches to HOLD. It also stops (brake, then HOLD) at RLNK_MAX_DISP
-    from where the return began, after RLNK_MAX_TIME, when the rover makes no progress for RLNK_STUCK_S, or at the trail's start.
+    from where the return began, after RLNK_MAX_TIME, when the rover makes no progress for RLNK_STUCK_S, or at
+    the trail's start.
     A mode change by anyone else (the pilot's switch, the ground station, the firmware's own failsafe) ends the
     return at once, as does a GUIDED location target (it sets none): it never fights the pilot. Every start and
     stop, with its reason, is a STATUSTEXT beginning "RLNK:".
