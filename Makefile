@@ -3,7 +3,8 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
-# the map test drives Debian's chromium (root in CI; sudo on a developer's machine)
+# the map test drives Debian's chromium (root in CI; sudo on a developer's machine); the Lua applet's test parses
+# it with Debian's luac5.3 (ArduPilot's scripting is Lua 5.3, so its compiler checks the same grammar)
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # the ArduPilot Rover SITL for the firmware tests and benchmark: RETURNLINK_ARDUROVER if set, else the one shared
 # beside this checkout, if any (none: the firmware tests skip and say so; .ci/run always sets it)
@@ -17,6 +18,7 @@ export RETURNLINK_PX4
 
 $(STAMP): pyproject.toml
 	test -x /usr/bin/chromium || { $(SUDO) apt-get update && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y chromium; }
+	test -x /usr/bin/luac5.3 || { $(SUDO) apt-get update && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y lua5.3; }
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev]'

@@ -35,7 +35,7 @@ from sim.jams import Jams, radio_event
 from sim.lease_record import LeaseRecord
 from sim.plants import Plant
 from sim.plants.native import TICK_RATE, NativePlant
-from sim.policies import COMPANION_POLICY, DEFAULT_POLICY, FIRMWARE_VEHICLE, PX4_VEHICLE
+from sim.policies import APPLET_POLICY, COMPANION_POLICY, DEFAULT_POLICY, FIRMWARE_VEHICLE, PX4_VEHICLE
 from sim.scenario import Scenario
 from vehicle.app import DT
 from vehicle.lease import Holder
@@ -105,6 +105,10 @@ def plant_for(vehicle: str, policy: str) -> type:
         from sim.plants.companion import CompanionPlant
 
         return CompanionPlant
+    if policy == APPLET_POLICY:
+        from sim.plants.applet import AppletPlant
+
+        return AppletPlant
     from sim.plants.firmware import FirmwarePlant
 
     return FirmwarePlant

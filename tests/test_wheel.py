@@ -101,6 +101,7 @@ def test_the_wheel_holds_every_module_and_data_file_and_no_tests(installed):
     missing = sorted(_repo_files() - names)
     assert not missing, f"the wheel lacks {len(missing)} files of the repository: {missing}"
     assert "vehicle/companion/returnlink-companion.service" in names
+    assert "vehicle/applet/returnlink.lua" in names  # the applet an owner copies to APM/scripts/
     assert not [n for n in names if n.split("/")[0] in ("tests", "benchmarks", "docs", "params")]
     assert not [n for n in names if "__pycache__" in n or n.endswith(".pyc")]
 

@@ -99,8 +99,11 @@ class Lockstep:
     time on; ``drain`` reads what it said, ``send`` talks to it; ``close`` stops it (always, in a ``finally``)."""
 
     def __init__(self, world: World, robot: Robot, firmware: Path, params: dict[str, float],
-                 speedup: float = SPEEDUP, log_path: Path | None = None) -> None:
+                 speedup: float = SPEEDUP, log_path: Path | None = None, scripts: tuple[Path, ...] = ()) -> None:
+        """``scripts``: Lua files for the firmware's ``scripts/`` folder (its working directory's, as the SD card's
+        ``APM/scripts/`` on a flight controller); they run when the parameters set SCR_ENABLE 1."""
         self.world, self.robot = world, robot
+        self.scripts = tuple(Path(s) for s in scripts)
         self.firmware = Path(firmware)
         self.params = dict(params)
         self.speedup = speedup
@@ -130,6 +133,11 @@ class Lockstep:
         proc = FirmwareProcess(self.firmware, instance, [])
         defaults = proc.workdir / "returnlink.parm"
         defaults.write_text("".join(f"{k} {v:g}\n" for k, v in self.params.items()))
+        if self.scripts:
+            folder = proc.workdir / "scripts"
+            folder.mkdir(exist_ok=True)
+            for script in self.scripts:
+                (folder / script.name).write_bytes(script.read_bytes())
         home = ",".join(f"{v:.7f}" for v in HOME) + ",0"
         # ArduPilot's own SITL rover defaults sit beside a binary built the documented way
         # (Tools/autotest/default_params/rover.parm, copied next to it); ours go on top

@@ -52,7 +52,9 @@ def episodes(plant) -> list[tuple[float, float | None, int]]:
     out: list[tuple[float, float | None, int]] = []
     asked = [t for t, text in plant.operator.log if text == "rtl requested"]
     current: list | None = None
-    for t, mode in plant.link.tap.modes:
+    # a plant whose returns do not show as modes of their own (the applet's, in GUIDED) marks them in its timeline
+    timeline = getattr(plant, "return_timeline", None)
+    for t, mode in timeline if timeline is not None else plant.link.tap.modes:
         if current is None and mode in returns and t > 0:
             if any(abs(t - a) < 2.0 for a in asked):
                 continue

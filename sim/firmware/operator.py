@@ -77,9 +77,18 @@ class FirmwareOperator:
             if kind == "HEARTBEAT" and msg.get_srcComponent() == 1:
                 self.mode, self.armed = msg.custom_mode, bool(msg.base_mode & apm.MAV_MODE_FLAG_SAFETY_ARMED)
             elif kind == "LOCAL_POSITION_NED":
+                self._position_heard(t)
                 self.position = (self.origin[0] + msg.x, self.origin[1] + msg.y)
                 self.speed = math.hypot(msg.vx, msg.vy)
                 self.last_position_t = t
+            elif kind == "STATUSTEXT":
+                self._text_heard(msg.text, t)
+
+    def _position_heard(self, t: float) -> None:
+        """A position report arrives at ``t`` (``last_position_t`` still the one before): for a subclass."""
+
+    def _text_heard(self, text: str, t: float) -> None:
+        """A STATUSTEXT from the rover reached the station: for a subclass (this operator reads no texts)."""
 
     def fresh(self, t: float) -> bool:
         return self.last_position_t is not None and t - self.last_position_t < STALE_TELEMETRY

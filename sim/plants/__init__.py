@@ -1,13 +1,13 @@
 """What flies a scenario, behind one port: the ``Plant`` the one simulator loop (``sim.runner.Run``) drives.
 
-A scenario is flown by one of four plants: ``native`` (returnlink's vehicle on a pymunk robot), ``firmware`` (the
-real ArduPilot Rover firmware over its JSON physics backend, its own failsafes), ``companion`` (that firmware
-with returnlink companion on its telemetry port) and ``px4`` (the real PX4 rover over its HIL simulator link, its
-own data-link failsafe). Everything around the plant is the loop's, once for all four:
-simulated time, the radio model and its lockstep bus, the scripted ground stations, the scenario's timed events and
-jams, RADIO_STATUS, the per-tick record, the .tlog, the progress bar; and after the run one metrics pipeline, one
-verdict (``sim.metrics``). So a plant is compared with another in the very same world, packet fates and operator
-script, as ArduPilot's SITL flies many physics backends behind one packet contract.
+A scenario is flown by one of five plants: ``native`` (returnlink's vehicle on a pymunk robot), ``firmware`` (the
+real ArduPilot Rover firmware over its JSON physics backend, its own failsafes), ``companion`` (that firmware with
+returnlink companion on its telemetry port), ``applet`` (that firmware carrying returnlink's Lua applet) and ``px4``
+(the real PX4 rover over its HIL simulator link, its own data-link failsafe). Everything around the plant is the
+loop's, once for all five: simulated time, the radio model and its lockstep bus, the scripted ground stations, the
+scenario's timed events and jams, RADIO_STATUS, the per-tick record, the .tlog, the progress bar; and after the run
+one metrics pipeline, one verdict (``sim.metrics``). So a plant is compared with another in the very same world,
+packet fates and operator script, as ArduPilot's SITL flies many physics backends behind one packet contract.
 
 The loop never reaches into a plant beyond this protocol, and a plant never imports the loop: it is handed what it
 needs (the scenario, the seed, the frames the radio delivered) and answers in plain values.

@@ -31,12 +31,20 @@ from pathlib import Path
 from sim.firmware.lockstep import MODE_NAMES, SKID_PARAMS, SPEEDUP, Lockstep
 from sim.firmware.operator import FirmwareOperator
 from sim.plants.autopilot import AutopilotPlant
-from sim.policies import COMPANION_POLICY, DEFAULT_FIRMWARE_POLICY, FAILSAFE_POLICIES, FIRMWARE_VEHICLE
+from sim.policies import (
+    APPLET_POLICY,
+    COMPANION_POLICY,
+    DEFAULT_FIRMWARE_POLICY,
+    FAILSAFE_POLICIES,
+    FIRMWARE_VEHICLE,
+)
 from sim.scenario import Scenario, Station
 from vehicle.companion.setup import NEEDS
 
 # per policy; the companion's is the backstop: Hold once a dead companion's keepalive stops (docs/architecture.md §11)
-FS_ACTION: dict[str, int] = {"ardupilot-hold": 2, "ardupilot-rtl": 1, "ardupilot-smartrtl": 4, COMPANION_POLICY: 2}
+# the applet's too: Hold once its return has not found the link by FS_GCS_TIMEOUT, or it died (sim.plants.applet)
+FS_ACTION: dict[str, int] = {"ardupilot-hold": 2, "ardupilot-rtl": 1, "ardupilot-smartrtl": 4, COMPANION_POLICY: 2,
+                             APPLET_POLICY: 2}
 
 
 def firmware_params(policy: str, lnk_timeout: float, max_speed: float,

@@ -18,7 +18,10 @@ NATIVE_POLICIES: tuple[str, ...] = ("returnlink", "hold", "rtl", "smartrtl", "ba
 FAILSAFE_POLICIES: tuple[str, ...] = ("ardupilot-hold", "ardupilot-rtl", "ardupilot-smartrtl")
 # returnlink as a companion computer beside the same firmware (§11), its ground link through the scenario's radio
 COMPANION_POLICY = "companion"
-FIRMWARE_POLICIES: tuple[str, ...] = (*FAILSAFE_POLICIES, COMPANION_POLICY)
+# returnlink's Lua applet aboard the same firmware (docs/architecture.md §11.3): no returnlink process at all, the
+# firmware's GCS failsafe its backstop
+APPLET_POLICY = "applet"
+FIRMWARE_POLICIES: tuple[str, ...] = (*FAILSAFE_POLICIES, COMPANION_POLICY, APPLET_POLICY)
 # PX4's own data-link failsafe (NAV_DLL_ACT 1 Hold, 2 Return; docs/architecture.md §10.1), flown only by ``px4rover``
 # (``companion`` flies beside PX4 too, §11.2: it is the one policy both autopilot vehicles fly)
 PX4_FAILSAFE_POLICIES: tuple[str, ...] = ("px4-hold", "px4-return")
@@ -53,6 +56,9 @@ def flies(policy: str, vehicle: str) -> bool:
 def check_policy(name: str) -> str:
     """The name of a policy the native vehicle flies, or ValueError saying why not."""
     if name in FIRMWARE_POLICIES:
+        if name == APPLET_POLICY:
+            raise ValueError(f"policy {name!r} is returnlink's Lua applet aboard the ArduPilot firmware: fly it with "
+                             f"vehicle {FIRMWARE_VEHICLE!r}")
         if name == COMPANION_POLICY:
             raise ValueError(f"policy {name!r} is returnlink companion beside a real autopilot: fly it with vehicle "
                              f"{FIRMWARE_VEHICLE!r} or {PX4_VEHICLE!r}")
