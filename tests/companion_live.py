@@ -7,6 +7,7 @@ station out of range and bring it back where the rover comes within it.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -106,3 +107,26 @@ def pump(parts: list, seconds: float, until: Callable[[], bool] | None = None, w
         return False
     assert until(), f"timed out after {seconds} s waiting for {what}"
     return True
+
+
+@contextlib.contextmanager
+def firmware_companion(tmp_path):
+    """The firmware booted, the companion on its SERIAL1, and the owner's station the companion sends to: yields
+    (firmware, companion, owner) once the owner hears the companion's LEASE_STATUS, and stops all three after."""
+    from tests.ardurover import Firmware
+
+    fw = Firmware(tmp_path)
+    owner = LiveStation(255)
+    comp = None
+    try:
+        fw.boot()
+        comp = CompanionProcess(["--autopilot", f"tcp:127.0.0.1:{fw.serial1}", "--gcs",
+                                 f"udpout:127.0.0.1:{owner.port}", "--params", str(tmp_path / "companion.parm")],
+                                tmp_path)
+        pump([owner, fw], 30, lambda: owner.gs.vehicle.status is not None, "the companion's LEASE_STATUS")
+        yield fw, comp, owner
+    finally:
+        if comp is not None:
+            comp.stop()
+        owner.close()
+        fw.stop()

@@ -13,7 +13,7 @@ import pytest
 from gcs.plans import parse_spec
 from link import dialect
 from tests.ardurover import Firmware
-from tests.companion_live import CompanionProcess, LiveStation, pump
+from tests.companion_live import CompanionProcess, LiveStation, firmware_companion, pump
 from tests.interop import MAVProxy
 
 pytestmark = pytest.mark.firmware
@@ -26,21 +26,8 @@ RANGE_M = 15.0  # the test's radio: the operator is heard only within this of ho
 @pytest.fixture()
 def rig(tmp_path):
     """The firmware booted, the companion on its SERIAL1, and the owner's station the companion sends to."""
-    fw = Firmware(tmp_path)
-    owner = LiveStation(255)
-    comp = None
-    try:
-        fw.boot()
-        comp = CompanionProcess(["--autopilot", f"tcp:127.0.0.1:{fw.serial1}", "--gcs",
-                                 f"udpout:127.0.0.1:{owner.port}", "--params", str(tmp_path / "companion.parm")],
-                                tmp_path)
-        pump([owner, fw], 30, lambda: owner.gs.vehicle.status is not None, "the companion's LEASE_STATUS")
-        yield fw, comp, owner
-    finally:
-        if comp is not None:
-            comp.stop()
-        owner.close()
-        fw.stop()
+    with firmware_companion(tmp_path) as r:
+        yield r
 
 
 def claim_and_arm(fw: Firmware, owner: LiveStation) -> None:

@@ -17,8 +17,7 @@ import time
 
 import pytest
 
-from tests.ardurover import Firmware
-from tests.companion_live import CompanionProcess, LiveStation, pump
+from tests.companion_live import firmware_companion, pump
 from tests.test_companion_firmware import GUIDED, HOLD, claim_and_arm
 
 pytestmark = pytest.mark.firmware
@@ -28,21 +27,9 @@ R = 18.0  # m: the owner's radio range (full delivery inside, none beyond)
 
 @pytest.fixture()
 def rig(tmp_path):
-    fw = Firmware(tmp_path)
-    owner = LiveStation(255)
-    comp = None
-    try:
-        fw.boot()
-        comp = CompanionProcess(["--autopilot", f"tcp:127.0.0.1:{fw.serial1}", "--gcs",
-                                 f"udpout:127.0.0.1:{owner.port}", "--params", str(tmp_path / "companion.parm")],
-                                tmp_path)
-        pump([owner, fw], 30, lambda: owner.gs.vehicle.status is not None, "the companion's LEASE_STATUS")
-        yield fw, comp, owner
-    finally:
-        if comp is not None:
-            comp.stop()
-        owner.close()
-        fw.stop()
+    """The firmware booted, the companion on its SERIAL1, and the owner's station the companion sends to."""
+    with firmware_companion(tmp_path) as r:
+        yield r
 
 
 def test_the_companion_rests_inside_a_hard_edge_with_link_regained_beside_the_firmwares_physics(rig):
