@@ -104,8 +104,9 @@ def _policy_for(args: argparse.Namespace, kind: str) -> str:
     policy = args.policy or default
     if not flies(policy, kind):
         if kind == FIRMWARE_VEHICLE:
-            raise _fail(f"vehicle {kind} flies the ArduPilot firmware's own failsafes or returnlink beside it: "
-                        f"--policy ardupilot-hold, ardupilot-rtl, ardupilot-smartrtl or companion (got {policy})")
+            raise _fail(f"vehicle {kind} flies the ArduPilot firmware's own failsafes, returnlink beside it or the "
+                        "Lua applet in it: --policy ardupilot-hold, ardupilot-rtl, ardupilot-smartrtl, companion or "
+                        f"applet (got {policy})")
         if kind == PX4_VEHICLE:
             raise _fail(f"vehicle {kind} flies PX4's own data-link failsafe or returnlink beside it: --policy "
                         f"{' or '.join(PX4_FAILSAFE_POLICIES)} or companion (got {policy})")
