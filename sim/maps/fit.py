@@ -103,8 +103,7 @@ def _read(path: Path):
     while True:
         try:
             m = conn.recv_match()
-        except Exception as e:  # noqa: BLE001 - pymavlink raises bare errors for a cut-off file: the end of the log
-            del e
+        except Exception:  # noqa: BLE001 - pymavlink raises bare errors for a cut-off file: the end of the log
             break
         if m is None:
             break
