@@ -441,7 +441,7 @@ def _cmd_sim_serve_autopilot(args: argparse.Namespace, sc, kind: str) -> int:
     from link.storage import StoredFileError
     from sim.firmware.process import stop_on_terminate
     from sim.firmware.report import trajectory
-    from sim.policies import COMPANION_POLICY, PX4_VEHICLE
+    from sim.policies import APPLET_POLICY, COMPANION_POLICY, PX4_VEHICLE
 
     policy = _policy_for(args, kind)
     companion = policy == COMPANION_POLICY
@@ -465,7 +465,9 @@ def _cmd_sim_serve_autopilot(args: argparse.Namespace, sc, kind: str) -> int:
     else:
         from sim.firmware.companion_serve import CompanionServer as companion_server
         from sim.firmware.process import FirmwareError as failure
-        from sim.firmware.serve import FirmwareServer as server_type
+        from sim.firmware.serve import AppletServer, FirmwareServer
+
+        server_type = AppletServer if policy == APPLET_POLICY else FirmwareServer
 
         binary, log = _firmware(args.firmware), "firmware.log"
     out = Path(args.out) if args.out else Path("out") / f"serve-{sc.name}-{kind}"
@@ -493,7 +495,8 @@ def _cmd_sim_serve_autopilot(args: argparse.Namespace, sc, kind: str) -> int:
         return 2
     host, port = server.address
     where = "its telemetry link" if px4 else "the firmware's telemetry port"
-    what = f"returnlink companion on {where}" if companion else f"policy {policy}"
+    what = (f"returnlink companion on {where}" if companion else "returnlink's Lua applet aboard"
+            if policy == APPLET_POLICY else f"policy {policy}")
     print(f"returnlink: {sc.name} with {who} ({binary}, {what}) on udp {host}:{port}, sending to "
           + ", ".join(f"{h}:{p}" for h, p in peers) + ("" if args.perfect_link else ", through the radio model")
           + ("" if keystore is None else f"; the companion signs with key {keystore.key.fingerprint} from "
@@ -786,7 +789,14 @@ def _cmd_keys(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from sim.policies import COMPANION_POLICY, DEFAULT_POLICY, FAILSAFE_POLICIES, POLICY_NAMES, PX4_FAILSAFE_POLICIES
+    from sim.policies import (
+        APPLET_POLICY,
+        COMPANION_POLICY,
+        DEFAULT_POLICY,
+        FAILSAFE_POLICIES,
+        POLICY_NAMES,
+        PX4_FAILSAFE_POLICIES,
+    )
 
     p = argparse.ArgumentParser(
         prog="returnlink", description="Lease-based automated return to link for MAVLink robots.")
@@ -826,9 +836,11 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--vehicle", choices=["rover", "legged", "ardurover", "px4rover"],
                        help="robot model (default: the scenario's); ardurover: the real ArduPilot firmware; "
                             "px4rover: the real PX4 rover")
-    serve.add_argument("--policy", choices=(*FAILSAFE_POLICIES, COMPANION_POLICY, *PX4_FAILSAFE_POLICIES),
-                       help="with --vehicle ardurover: its GCS failsafe (default ardupilot-smartrtl), or companion: "
-                            "returnlink companion on its telemetry port (--params, --key, --state configure it); "
+    serve.add_argument("--policy", choices=(*FAILSAFE_POLICIES, COMPANION_POLICY, APPLET_POLICY,
+                                            *PX4_FAILSAFE_POLICIES),
+                       help="with --vehicle ardurover: its GCS failsafe (default ardupilot-smartrtl), companion: "
+                            "returnlink companion on its telemetry port (--params, --key, --state configure it), or "
+                            "applet: returnlink's Lua applet aboard the firmware (its RLNK_ parameters over MAVLink); "
                             "with --vehicle px4rover: px4-hold or px4-return (default), PX4's data-link failsafe, or "
                             "companion")
     _add_firmware_option(serve)

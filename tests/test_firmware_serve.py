@@ -103,3 +103,50 @@ def test_a_ground_station_takes_control_through_the_served_companion(tmp_path):
     assert not thread.is_alive() and not server.link.process.alive()
     assert server.companion.vehicle is not None and server.companion.vehicle.book.owner == 255
     assert "lease teleop" in server.out.getvalue()  # the status line says who holds the lease
+
+
+def test_a_plain_ground_station_meets_the_served_applet():
+    """`sim serve --vehicle ardurover --policy applet`: the firmware boots with the Lua applet aboard (its ready
+    text, said during the boot before any ground station is served), whose RLNK_ parameters an ordinary ground
+    station reads through the radio proxy, and the vehicle-side radio's RADIO_STATUS is fed to the firmware once a
+    second, as on a rover with a SiK radio."""
+    from sim.firmware.serve import AppletServer
+    from vehicle.applet import TEXT_PREFIX
+
+    firmware = firmware_or_skip()
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    gcs.bind(("127.0.0.1", 0))
+    gcs.settimeout(0.2)
+    server = AppletServer(load("tunnel"), 1, "applet", firmware, port=0, peers=(gcs.getsockname(),),
+                          speedup=20.0, duration=40.0, out=io.StringIO())
+    sent: list[float] = []
+    feed = server.plant.radio_status
+    server.plant.radio_status = lambda state, t: (sent.append(t), feed(state, t))
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    mav = apm.MAVLink(None, srcSystem=255, srcComponent=190)
+    timeout = None
+    deadline = time.monotonic() + 90
+    try:
+        while time.monotonic() < deadline and timeout is None:
+            try:
+                data, _ = gcs.recvfrom(65535)
+            except TimeoutError:
+                continue
+            for m in mav.parse_buffer(data) or ():
+                kind = m.get_type()
+                if kind == "HEARTBEAT" and m.get_srcSystem() == 1:
+                    gcs.sendto(apm.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(mav), server.address)
+                    if timeout is None:
+                        gcs.sendto(apm.MAVLink_param_request_read_message(1, 1, b"RLNK_TIMEOUT", -1).pack(mav),
+                                   server.address)
+                elif kind == "PARAM_VALUE" and m.param_id == "RLNK_TIMEOUT":
+                    timeout = m.param_value
+    finally:
+        thread.join(120)
+        gcs.close()
+    texts = [text for _t, text in server.plant.applet_texts]
+    assert any(text.startswith(TEXT_PREFIX + "ready") for text in texts), texts
+    assert timeout == pytest.approx(server.plant.rlnk["RLNK_TIMEOUT"])
+    assert len(sent) >= 10 and all(b - a == pytest.approx(1.0, abs=0.05) for a, b in zip(sent, sent[1:]))
+    assert not thread.is_alive() and not server.link.process.alive()

@@ -5,6 +5,10 @@ The firmware paces itself (``--speedup K``) and the bridge answers every servo p
 SERIAL0 reaches 127.0.0.1:14550 and :14540 (and whoever talks to the UDP port) through the same radio proxy the
 native `sim serve` uses, so MAVProxy, MAVSDK or QGroundControl fly the firmware and feel the link die where the
 scenario says. No scripted operator: you are the operator. On exit it writes the trajectory plot.
+
+With ``--policy applet`` the firmware carries returnlink's Lua applet (``AppletServer``): the same script and RLNK_
+parameters as a lockstep run, and the vehicle-side radio's RADIO_STATUS into the firmware's port once a second, so
+the applet hears the link as it would on a rover with a SiK radio.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from link.proxy import RadioProxy
 from link.radio import Radio
 from link.transports import UdpTransport
 from sim.firmware.lockstep import MODE_NAMES
+from sim.plants.applet import AppletPlant
 from sim.plants.firmware import FirmwarePlant
 from sim.policies import FIRMWARE_VEHICLE
 from sim.runner import frozen
@@ -111,3 +116,18 @@ class FirmwareServer:
         finally:
             self.transport.sock.close()
         return self
+
+
+class AppletServer(FirmwareServer):
+    """The firmware with returnlink's Lua applet aboard (``sim.plants.applet.AppletPlant``), served as above: the
+    applet's returns and texts reach your ground station as they would from a rover."""
+
+    plant_type: type = AppletPlant
+    _next_radio = 0.0  # when the vehicle-side radio next reports
+
+    def _tick(self, t: float) -> None:
+        super()._tick(t)
+        state = self.proxy.state
+        if state is not None and t >= self._next_radio:  # the radio's report, once a second as a SiK radio sends it
+            self._next_radio = t + 1.0
+            self.plant.radio_status(state, t)
