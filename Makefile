@@ -30,9 +30,11 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/returnlink sim run tunnel --out out/demo
 
+# two workers (tests/conftest.py: how the tests are grouped), then the tests that need the machine alone
 test: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n 2 --dist loadgroup -m "not exclusive"
+	$(BIN)/python -m pytest -m exclusive
 
 # the pure cores, their properties and the in-process protocol tests (tiers: pytestmark in each test file), under a minute
 test-fast: $(STAMP)

@@ -112,7 +112,8 @@ def test_mavproxy_flies_the_rover_through_the_companion(tmp_path):
         mp = MAVProxy(port, tmp_path, "mode,arm,rc,cmdlong,link,param")
         comp = CompanionProcess(["--autopilot", f"tcp:127.0.0.1:{fw.serial1}", "--gcs", f"udpout:127.0.0.1:{port}"],
                                 tmp_path)
-        pump([fw], 30, lambda: "returnlink companion" in mp.text(), "MAVProxy to hear the companion")
+        # (90 s: a hang guard; MAVProxy's start-up once took over 30 s on a loaded 2-core machine)
+        pump([fw], 90, lambda: "returnlink companion" in mp.text(), "MAVProxy to hear the companion")
         mp.say("arm throttle")  # a plain client: its first command makes it the owner (LEASE_AUTOGRANT)
         pump([fw], 15, lambda: fw.armed, "MAVProxy's arm to reach the firmware")
         mp.say("rc 3 1800")

@@ -26,7 +26,7 @@ import pytest
 from sim.child import port_free
 from tests.ardurover import firmware
 
-pytestmark = [pytest.mark.firmware, pytest.mark.interop]
+pytestmark = [pytest.mark.firmware, pytest.mark.interop, pytest.mark.exclusive]
 
 PAGE = Path(__file__).resolve().parent.parent / "docs" / "companion.md"
 SECTION = "To try it on a desk with the SITL firmware"

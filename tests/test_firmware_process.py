@@ -49,6 +49,17 @@ def test_a_given_way_that_is_unusable_is_an_error_not_a_fallback(tmp_path):
         find_firmware(None, {ENV: str(tmp_path / "nope"), "PATH": str(tmp_path)})
 
 
+@pytest.mark.parametrize("pid", [0, 199, 200, 398])
+def test_a_search_from_the_process_id_never_takes_instance_0(monkeypatch, pid):
+    """Instance 0 (TCP 5760) is a person's own SITL's, and the README walkthrough's: a simulator run beside it, or a
+    test beside the walkthrough, must not take its ports. Processes whose id once led the search to 0 start at 1."""
+    monkeypatch.delenv(process.INSTANCE_ENV, raising=False)
+    monkeypatch.setattr(process.os, "getpid", lambda: pid)
+    n, sock = claim_instance()
+    sock.close()
+    assert 1 <= n <= process.MAX_INSTANCE
+
+
 def test_an_instance_is_claimed_by_its_bound_port_and_never_twice():
     n1, s1 = claim_instance(start=150)
     n2, s2 = claim_instance(start=150)

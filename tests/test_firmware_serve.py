@@ -148,5 +148,5 @@ def test_a_plain_ground_station_meets_the_served_applet():
     texts = [text for _t, text in server.plant.applet_texts]
     assert any(text.startswith(TEXT_PREFIX + "ready") for text in texts), texts
     assert timeout == pytest.approx(server.plant.rlnk["RLNK_TIMEOUT"])
-    assert len(sent) >= 10 and all(b - a == pytest.approx(1.0, abs=0.05) for a, b in zip(sent, sent[1:]))
+    assert len(sent) >= 10 and all(b - a == pytest.approx(1.0, abs=0.05) for a, b in zip(sent, sent[1:], strict=False))
     assert not thread.is_alive() and not server.link.process.alive()

@@ -57,9 +57,13 @@ def claim_instance(start: int | None = None) -> tuple[int, socket.socket]:
         if not text.isdigit() or int(text) > MAX_INSTANCE:
             raise FirmwareError(f"{INSTANCE_ENV}={text!r}: an instance number 0..{MAX_INSTANCE} is needed")
         start = int(text)
-    first = os.getpid() % (MAX_INSTANCE + 1) if start is None else start
-    for k in range(MAX_INSTANCE + 1):
-        n = (first + k) % (MAX_INSTANCE + 1)
+    # instance 0 is the one a person's own SITL and ground station use (TCP 5760, what the README's walkthrough
+    # starts): a search from the process id never takes it, only an explicit start does
+    lowest = 0 if start is not None else 1
+    span = MAX_INSTANCE + 1 - lowest
+    first = lowest + os.getpid() % span if start is None else start
+    for k in range(span):
+        n = lowest + (first - lowest + k) % span
         off = 10 * n
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
