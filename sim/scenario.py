@@ -422,12 +422,26 @@ def _world(r: _Reader, raw: dict, mt: MapTable | None = None) -> tuple[tuple[flo
     world = r.table(raw, "world", "world", ("bounds", "walls", "denied", "stations"), {} if mt else ...)
     if mt is not None and world.get("walls"):
         raise r.fail("world.walls", "a map world's walls are its occupied cells: draw them on the map")
+    b = _bounds(r, world, mt)
+    walls = _walls(r, world)
+    denied = tuple(r.points(z, "polygon", f"world.denied[{k}].polygon", min_len=3)
+                   for k, z in enumerate(r.tables(world, "denied", "world.denied", ("polygon",))))
+    return b, walls, denied, _stations(r, world, mt)
+
+
+def _bounds(r: _Reader, world: dict, mt: MapTable | None) -> tuple[float, ...]:
+    """[world] bounds: [xmin, ymin, xmax, ymax]; a map world's default to the map's, rounded out to the metre."""
     if mt is not None and "bounds" not in world:
         g = mt.site.grid().bounds()
         world = {**world, "bounds": [math.floor(g[0]), math.floor(g[1]), math.ceil(g[2]), math.ceil(g[3])]}
     b = r.get(world, "bounds", "world.bounds", list)
     if len(b) != 4 or not all(isinstance(c, (int, float)) for c in b) or b[0] >= b[2] or b[1] >= b[3]:
         raise r.fail("world.bounds", "must be [xmin, ymin, xmax, ymax] with min < max")
+    return tuple(float(c) for c in b)
+
+
+def _walls(r: _Reader, world: dict) -> tuple[Wall, ...]:
+    """[[world.walls]]: polylines with a thickness and a radio loss; no segment of zero length."""
     walls = []
     for k, w in enumerate(r.tables(world, "walls", "world.walls", ("points", "thickness", "attenuation_db"))):
         p = f"world.walls[{k}]"
@@ -437,8 +451,11 @@ def _world(r: _Reader, raw: dict, mt: MapTable | None = None) -> tuple[tuple[flo
                 raise r.fail(f"{p}.points", f"points {j - 1} and {j} are the same: a wall of zero length")
         walls.append(Wall(points, r.number(w, "thickness", f"{p}.thickness", 0.5, 0.01, 20.0),
                           r.number(w, "attenuation_db", f"{p}.attenuation_db", 20.0, 0.0, 200.0)))
-    denied = tuple(r.points(z, "polygon", f"world.denied[{k}].polygon", min_len=3)
-                   for k, z in enumerate(r.tables(world, "denied", "world.denied", ("polygon",))))
+    return tuple(walls)
+
+
+def _stations(r: _Reader, world: dict, mt: MapTable | None) -> tuple[Station, ...]:
+    """[[world.stations]]: at least one ground station; a map world's [map] station first unless named here."""
     stations = []
     for k, s in enumerate(r.tables(world, "stations", "world.stations", ("name", "position", "sysid", "power_dbm"))):
         p = f"world.stations[{k}]"
@@ -452,7 +469,7 @@ def _world(r: _Reader, raw: dict, mt: MapTable | None = None) -> tuple[tuple[flo
         stations.insert(0, mt.station)
     if not stations:
         raise r.fail("world.stations", "needs at least one ground station")
-    return tuple(float(c) for c in b), tuple(walls), denied, tuple(stations)
+    return tuple(stations)
 
 
 def _radio(r: _Reader, raw: dict, extra: tuple[str, ...] = ()) -> tuple[RadioParams, dict[str, float]]:
