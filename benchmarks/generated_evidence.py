@@ -38,27 +38,33 @@ def family_table(rows: list[dict], family: str) -> tuple[str, dict[str, float]]:
     pooled: dict[str, float] = {}
     for pol in POLICIES:
         rs = [r for r in rows if r["scenario"] == family and r["policy"] == pol]
-        if not rs:
-            continue
-        ran = [r for r in rs if r.get("status") in FINISHED]
-        lost = [r for r in ran if r.get("link_lost_s") is not None]
-        by_return = sum(1 for r in lost if r.get("regained_by") == "return")
-        passed = sum(1 for r in ran if r.get("passed"))
-        robots = [v for v in ROBOTS if any(r["vehicle"] == v for r in ran)]
-        pooled[pol] = _p95(ran)
-        if len(robots) > 1:
-            p95 = " / ".join([f"{pooled[pol]:.2f}"] + [f"{_p95([r for r in ran if r['vehicle'] == v]):.2f}"
-                                                       for v in robots])
-        else:
-            kinds = sorted({r["vehicle"] for r in ran})
-            p95 = f"{pooled[pol]:.2f} ({', '.join(kinds)})"
-        rest = [x for r in lost if (x := rest_from_loss(r)) is not None]
-        contacts = sum(int(r.get("collisions_during_return") or 0) for r in ran)
-        errors = len(rs) - len(ran)
-        lines.append(f"| {pol} | {len(rs)}{f' ({errors} errors)' if errors else ''} | "
-                     f"{100 * passed / max(1, len(ran)):.0f} % | {len(lost)}/{len(ran)} | {by_return}/{len(lost)} | "
-                     f"{p95} | {float(np.mean(rest)) if rest else float('nan'):.2f} m | {contacts} |")
+        if rs:
+            pooled[pol] = _p95([r for r in rs if r.get("status") in FINISHED])
+            lines.append(_policy_line(pol, rs, pooled[pol]))
     return "\n".join(lines), pooled
+
+
+def _policy_line(pol: str, rs: list[dict], pooled: float) -> str:
+    """One policy's line of a family's table, from its trials ``rs`` and its pooled P95."""
+    ran = [r for r in rs if r.get("status") in FINISHED]
+    lost = [r for r in ran if r.get("link_lost_s") is not None]
+    by_return = sum(1 for r in lost if r.get("regained_by") == "return")
+    passed = sum(1 for r in ran if r.get("passed"))
+    rest = [x for r in lost if (x := rest_from_loss(r)) is not None]
+    contacts = sum(int(r.get("collisions_during_return") or 0) for r in ran)
+    errors = len(rs) - len(ran)
+    return (f"| {pol} | {len(rs)}{f' ({errors} errors)' if errors else ''} | "
+            f"{100 * passed / max(1, len(ran)):.0f} % | {len(lost)}/{len(ran)} | {by_return}/{len(lost)} | "
+            f"{_p95_cell(ran, pooled)} | {float(np.mean(rest)) if rest else float('nan'):.2f} m | {contacts} |")
+
+
+def _p95_cell(ran: list[dict], pooled: float) -> str:
+    """The P95 cell: pooled, then each robot's when both flew; else pooled with the one robot named."""
+    robots = [v for v in ROBOTS if any(r["vehicle"] == v for r in ran)]
+    if len(robots) > 1:
+        return " / ".join([f"{pooled:.2f}"] + [f"{_p95([r for r in ran if r['vehicle'] == v]):.2f}" for v in robots])
+    kinds = sorted({r["vehicle"] for r in ran})
+    return f"{pooled:.2f} ({', '.join(kinds)})"
 
 
 def _seeds(text: str) -> range | None:

@@ -74,60 +74,85 @@ def compute(run) -> dict:
 def lease_figures(run) -> dict:
     """The §7 figures of a run whose plant flies returnlink's vehicle (natively, or as the companion beside the
     firmware), from the run's lease record (``sim.lease_record``) and the vehicle's own counters."""
-    v, tr = run.vehicle, run.trace
-    events = run.lease_events
-    first_return = next((e.t for e in v.event_log if e.current is not None and _holder_is_service(e)), None)
+    v = run.vehicle
     lost = run.losses[0] if run.losses else None
-    reaction = None
-    comms_return = next((e for e in v.event_log if e.reason.name == "COMMS_LOST" and _holder_is_service(e)), None)
-    # a baseline may take over later than its lease (SmartRTL waits FS_TIMEOUT): its return starts when it acts
-    acted = getattr(v.contingency, "acted", None)
-    if acted is not None:
-        first_return = acted[0] if acted else None
-    if comms_return is not None:
-        # from the moment the trigger's condition became true (silence: owner last heard + LNK_TIMEOUT; quality:
-        # the delivery estimate falling below LNK_MIN_Q), so the reaction to a quality loss is never negative
-        cond = next((c for (t, _), c in zip(run.losses, run.loss_conditions, strict=True)
-                     if abs(t - comms_return.t) < 1e-9), None)
-        start = comms_return.t if acted is None else next((a for a in acted if a >= comms_return.t - 1e-9), None)
-        if cond is not None and start is not None:
-            reaction = start - cond + 0.0
+    first_return, reaction = _return_start(run)
     # the link counts as back when the vehicle says so: LINK_REGAINED ending a block, or after a block completed
     regained = run.link_backs[0][0] if run.link_backs else None
     blocks = run.blocks
     distance_back = sum(b.distance for b in blocks)
     max_disp = max((b.max_disp for b in blocks), default=0.0)
-    final_err = None
-    first = blocks[0] if blocks else None
-    if first is not None and first.end is not None:
-        if first.reason == "LINK_REGAINED" and run.regains and run.regains[0][1] is not None:
-            # halted because the link came back: the place that matters is where it came back
-            final_err = math.dist(first.end, run.true_at(run.regains[0][1]))
-        elif first.target_true is not None:
-            final_err = math.dist(first.end, first.target_true)
-    true, est = np.array(tr.true), np.array(tr.est)
-    if len(est):  # a tick with no estimate yet (the companion before it boots) is not an error of one
-        known = np.isfinite(est).all(axis=1)
-        true, est = true[known], est[known]
-    rmse = float(np.sqrt(np.mean(np.sum((true - est) ** 2, axis=1)))) if len(true) else 0.0
-    # the trail is in the vehicle's own frame, the trace in the true one: ``frame_offset`` is where the first lies
-    # in the second (none for the native vehicle, whose estimator starts at its true pose)
-    poly = np.vstack([v.trail.points(), [[v.estimator.pose.x, v.estimator.pose.y]]]) + np.asarray(run.frame_offset)
-    deviation = path_deviation(est[::5], poly)
+    rmse, est = _estimator_error(run.trace)
     m = {
         "link_lost_s": rounded(lost[1] if lost else None), "return_started_s": rounded(first_return),
         "reaction_latency_s": rounded(reaction, 4), "link_regained_s": rounded(regained),
         "distance_back_m": rounded(distance_back, 2), "max_displacement_m": rounded(max_disp, 2),
-        "final_target_error_m": rounded(final_err, 2), "collisions": run.world.collisions,
+        "final_target_error_m": rounded(_final_target_error(run), 2), "collisions": run.world.collisions,
         "stale_commands_executed": v.control.stale_commands_executed + run.audit_stale,
         "commands_rejected": v.commands_rejected,
-        "estimator_rmse_m": rounded(rmse), "trail_points": v.trail.count, "trail_max_deviation_m": rounded(deviation),
-        "lease_events": events,
+        "estimator_rmse_m": rounded(rmse), "trail_points": v.trail.count,
+        "trail_max_deviation_m": rounded(_trail_deviation(run, est)), "lease_events": run.lease_events,
     }
     m.update(after_loss(run))
     m["frames"] = dict(FRAMES)
     m["relapses"] = relapses(run.vehicle.event_log, run.trace.state)
     return m
+
+
+def _return_start(run) -> tuple[float | None, float | None]:
+    """(when the first return started, how long after its trigger's condition became true it did): the first
+    return-service lease, or for a baseline that takes over later than its lease (SmartRTL waits FS_TIMEOUT) when
+    it acted; the reaction is measured for the return a COMMS_LOST started, None without one."""
+    v = run.vehicle
+    first_return = next((e.t for e in v.event_log if e.current is not None and _holder_is_service(e)), None)
+    comms_return = next((e for e in v.event_log if e.reason.name == "COMMS_LOST" and _holder_is_service(e)), None)
+    acted = getattr(v.contingency, "acted", None)
+    if acted is not None:
+        first_return = acted[0] if acted else None
+    if comms_return is None:
+        return first_return, None
+    # from the moment the trigger's condition became true (silence: owner last heard + LNK_TIMEOUT; quality:
+    # the delivery estimate falling below LNK_MIN_Q), so the reaction to a quality loss is never negative
+    cond = next((c for (t, _), c in zip(run.losses, run.loss_conditions, strict=True)
+                 if abs(t - comms_return.t) < 1e-9), None)
+    start = comms_return.t if acted is None else next((a for a in acted if a >= comms_return.t - 1e-9), None)
+    if cond is not None and start is not None:
+        return first_return, start - cond + 0.0
+    return first_return, None
+
+
+def _final_target_error(run) -> float | None:
+    """How far from its target the first return block ended: from where the link came back when the block halted
+    because it did (the place that matters), else from the block's own target; None if it never ended or had
+    none."""
+    first = run.blocks[0] if run.blocks else None
+    if first is None or first.end is None:
+        return None
+    if first.reason == "LINK_REGAINED" and run.regains and run.regains[0][1] is not None:
+        return math.dist(first.end, run.true_at(run.regains[0][1]))
+    if first.target_true is not None:
+        return math.dist(first.end, first.target_true)
+    return None
+
+
+def _estimator_error(tr) -> tuple[float, np.ndarray]:
+    """(the estimator's RMSE against the truth, its estimates) over the ticks that had an estimate: a tick with
+    none yet (the companion before it boots) is not an error of one."""
+    true, est = np.array(tr.true), np.array(tr.est)
+    if len(est):
+        known = np.isfinite(est).all(axis=1)
+        true, est = true[known], est[known]
+    rmse = float(np.sqrt(np.mean(np.sum((true - est) ** 2, axis=1)))) if len(true) else 0.0
+    return rmse, est
+
+
+def _trail_deviation(run, est: np.ndarray) -> float:
+    """How far the estimated path strayed from the trail of crumbs. The trail is in the vehicle's own frame, the
+    trace in the true one: ``frame_offset`` is where the first lies in the second (none for the native vehicle,
+    whose estimator starts at its true pose)."""
+    v = run.vehicle
+    poly = np.vstack([v.trail.points(), [[v.estimator.pose.x, v.estimator.pose.y]]]) + np.asarray(run.frame_offset)
+    return path_deviation(est[::5], poly)
 
 
 def point(p: tuple[float, float] | None) -> list[float] | None:
@@ -173,27 +198,11 @@ def after_loss(run) -> dict:
     - ``return_speed_mps``: distance driven under service blocks over the time they commanded motion.
     - ``blocks``: one record per service block (true frame).
     """
-    tr, v = run.trace, run.vehicle
-    loss = rest = quality = regained_by = None
+    v = run.vehicle
+    loss = None
     if run.losses and run.losses[0][1] is not None:
         loss = run.true_at(run.losses[0][1])
-    end_t, end_k = _first_chain_end(run)
-    if run.losses and tr.t:
-        k_rest = len(tr.t) - 1
-        if end_k is not None:
-            k_rest = next((k - 1 for k in range(end_k, len(tr.t)) if tr.state[k] == State.TELEOP), k_rest)
-        rest, quality = tr.true[k_rest], tr.link[k_rest]
-        t_loss = run.losses[0][0]
-        # the contact that brought the link back began at ``since`` (LINK_REGAINED is declared LNK_REGAIN_S later)
-        back = next(((t, since) for t, since in run.link_backs if t >= t_loss - 1e-9), None)
-        if back is not None:
-            since = back[1] if back[1] is not None else back[0]
-            if end_t is None or since <= end_t + 1e-9 or quality >= GOOD_LINK_QUALITY:
-                regained_by = "return"
-            else:
-                k_back = min(len(tr.t) - 1, max(0, int(round(since / DT)) - 1))
-                moved = max((math.dist(tr.true[k], rest) for k in range(end_k, k_back + 1)), default=0.0)
-                regained_by = "operator" if moved > REGAIN_MOVED_M else "return"
+    rest, quality, regained_by = _rest_and_regain(run)
     driving = sum(b.driving_s for b in run.blocks)
     blocks = [{"index": b.index, "command": b.command, "start_s": rounded(b.started), "end_s": rounded(b.ended),
                "reason": b.reason or None, "distance_m": rounded(b.distance, 2),
@@ -207,6 +216,30 @@ def after_loss(run) -> dict:
         "return_speed_mps": rounded(sum(b.distance for b in run.blocks) / driving if driving > 0 else None),
         "blocks": blocks,
     }
+
+
+def _rest_and_regain(run) -> tuple:
+    """(rest position, link quality there, regained_by) of the first loss's chain (see ``after_loss``); all None
+    without a loss or a trace."""
+    tr = run.trace
+    if not (run.losses and tr.t):
+        return None, None, None
+    end_t, end_k = _first_chain_end(run)
+    k_rest = len(tr.t) - 1
+    if end_k is not None:
+        k_rest = next((k - 1 for k in range(end_k, len(tr.t)) if tr.state[k] == State.TELEOP), k_rest)
+    rest, quality = tr.true[k_rest], tr.link[k_rest]
+    t_loss = run.losses[0][0]
+    # the contact that brought the link back began at ``since`` (LINK_REGAINED is declared LNK_REGAIN_S later)
+    back = next(((t, since) for t, since in run.link_backs if t >= t_loss - 1e-9), None)
+    if back is None:
+        return rest, quality, None
+    since = back[1] if back[1] is not None else back[0]
+    if end_t is None or since <= end_t + 1e-9 or quality >= GOOD_LINK_QUALITY:
+        return rest, quality, "return"
+    k_back = min(len(tr.t) - 1, max(0, int(round(since / DT)) - 1))
+    moved = max((math.dist(tr.true[k], rest) for k in range(end_k, k_back + 1)), default=0.0)
+    return rest, quality, "operator" if moved > REGAIN_MOVED_M else "return"
 
 
 def relapses(events, states) -> int:

@@ -1,6 +1,6 @@
 """What every run leaves behind, whichever plant flew it: metrics.json, the operator's .tlog, the link map, the
 trajectory and timeline plots, and the printed summary. The metrics are one pipeline (``sim.metrics.compute``); the
-summary and the plots are the plant's (``Plant.summary``, ``Plant.report``): a firmware run has modes where a native
+summary and the plots are the plant's (``Plant.summary``, ``Plant.pictures``): a firmware run has modes where a native
 one has leases."""
 
 from __future__ import annotations
@@ -39,8 +39,6 @@ def write_linkmap(run, path: Path) -> Path | None:
 def write(run, out: Path, plots: bool = True) -> list[Path]:
     """metrics.json, run.tlog, linkmap.csv (a native or companion run) and (unless ``plots`` is off) trajectory.png and
     timeline.png in ``out``."""
-    import importlib
-
     from sim.runner import write_metrics, write_tlog
 
     paths = [write_metrics(run.metrics, out / "metrics.json"), write_tlog(run, out / "run.tlog")]
@@ -48,7 +46,5 @@ def write(run, out: Path, plots: bool = True) -> list[Path]:
     if linkmap is not None:
         paths.append(linkmap)
     if plots:
-        # matplotlib: about 0.4 CPU-s to import, paid only when plots are drawn
-        report = importlib.import_module(run.plant.report)
-        paths += [report.trajectory(run, out / "trajectory.png"), report.timeline(run, out / "timeline.png")]
+        paths += run.plant.pictures(run, out)
     return paths

@@ -10,13 +10,35 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any, Protocol
 
 import numpy as np
 
+from sim.lease_record import BlockRecord
 from sim.plots import draw_trail, draw_world, plt, save
-from sim.runner import Run
+from sim.scenario import Scenario
+from sim.world import World
 
 STATE_NAMES = ("NO_OWNER", "TELEOP", "AWAITING_CLAIM", "RETURNING", "HOLDING", "NAVIGATING")
+
+
+class Run(Protocol):
+    """What the pictures read of a finished ``sim.runner.Run`` of a plant with leases; named here, not imported,
+    because the plants that draw with this module are imported by the loop (docs/architecture.md §2: no circle)."""
+
+    scenario: Scenario
+    kind: str
+    seed: int
+    policy: str
+    metrics: dict
+    world: World
+    trace: Any  # the per-tick record (``sim.runner.Trace``): true and estimated paths, holder, state, link
+    vehicle: Any  # returnlink's vehicle: its trail
+    blocks: list[BlockRecord]
+    losses: list[tuple[float, float | None]]
+    link_backs: list[tuple[float, float | None]]
+
+    def true_at(self, t: float) -> tuple[float, float]: ...
 
 
 def _draw_run(ax, run: Run) -> None:

@@ -19,7 +19,6 @@ import sys
 from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
-from typing import Any
 
 from link.plan_items import (
     LEASE_BOUNDARY,
@@ -34,6 +33,7 @@ from link.plan_items import (
 from link.radio import RadioParams
 from sim.maps import mapfile
 from sim.maps.grid import DEFAULT_WALL_DB, DEFAULT_WALL_DB_PER_M, UNKNOWN, Site
+from sim.scenario_fields import Reader, ScenarioError
 from sim.world import Station, Wall, World
 from vehicle.lease import ExpireReason
 from vehicle.params import BY_NAME, ParamError, validate
@@ -62,13 +62,6 @@ MAP_KEYS = ("file", "station", "power_dbm", "unknown", "wall_db", "wall_db_per_m
 MAP_LOSS = ("wall_db", "wall_db_per_m")  # what a [radio] table may add for a map world (what `site fit` writes)
 # what a file with [map] and no [operator] may hold: the operator's route is drawn on the map from the seed
 MAP_WORLD_KEYS = ("name", "description", "duration", "seed", "vehicle", "map", "radio")
-
-
-class ScenarioError(ValueError):
-    def __init__(self, file: str, line: int | None, fld: str, message: str) -> None:
-        self.file, self.line, self.field = file, line, fld
-        where = f"{file}:{line}" if line else file
-        super().__init__(f"{where}: {fld}: {message}" if fld else f"{where}: {message}")
 
 
 @dataclass(frozen=True)
@@ -135,134 +128,6 @@ class Scenario:
         raise KeyError(name)
 
 
-class _Reader:
-    """Typed access to the parsed TOML that knows where each field was written."""
-
-    def __init__(self, file: str, text: str) -> None:
-        self.file, self.lines = file, text.splitlines()
-
-    def line_of(self, path: str) -> int | None:
-        """Best-effort line of ``a.b[2].c``: the table header (n-th occurrence for arrays), then the key."""
-        parts = re.findall(r"([A-Za-z_]+)(?:\[(\d+)\])?", path)
-        start, table = 0, ""
-        for k, (name, idx) in enumerate(parts):
-            is_last = k == len(parts) - 1
-            table = f"{table}.{name}" if table else name
-            if idx:
-                pat = re.compile(rf"^\s*\[\[\s*{re.escape(table)}\s*\]\]")
-                hits = [i for i, ln in enumerate(self.lines) if pat.match(ln)]
-                if int(idx) < len(hits):
-                    start = hits[int(idx)]
-                    continue
-                key = re.compile(rf"^\s*{re.escape(name)}\s*=")
-                for i in range(start, len(self.lines)):
-                    if key.match(self.lines[i]):
-                        return self._inline_item(i, int(idx)) + 1
-                return start + 1 if start else None
-            if is_last:
-                key = re.compile(rf"^\s*{re.escape(name)}\s*=")
-                for i in range(start, len(self.lines)):
-                    if key.match(self.lines[i]):
-                        return i + 1
-                inline = re.compile(rf"[{{,]\s*{re.escape(name)}\s*=")  # a key of an inline table
-                for i in range(start, len(self.lines)):
-                    if inline.search(self.lines[i]):
-                        return i + 1
-                return start + 1 if start else None
-            pat = re.compile(rf"^\s*\[\s*{re.escape(table)}\s*\]")
-            for i in range(start, len(self.lines)):
-                if pat.match(self.lines[i]):
-                    start = i
-                    break
-        return start + 1 if start else None
-
-    def _inline_item(self, i: int, idx: int) -> int:
-        """The line of the idx-th ``{...}`` of an inline array whose key is on line ``i`` (or i)."""
-        seen = -1
-        for j in range(i, len(self.lines)):
-            seen += self.lines[j].split("#", 1)[0].count("{")
-            if seen >= idx:
-                return j
-            if j > i and "=" in self.lines[j].split("#", 1)[0] and "{" not in self.lines[j]:
-                break  # the next key: the array has fewer items
-        return i
-
-    def fail(self, path: str, message: str) -> ScenarioError:
-        return ScenarioError(self.file, self.line_of(path), path, message)
-
-    def known(self, d: dict[str, Any], path: str, keys: Any) -> None:
-        """Every key of table ``d`` must be one of ``keys``; an unknown one is named with the closest known key."""
-        keys = sorted(keys)
-        for k in d:
-            if k not in keys:
-                close = difflib.get_close_matches(k, keys, 1, 0.6)
-                hint = f"; did you mean {close[0]!r}?" if close else ""
-                raise self.fail(f"{path}.{k}" if path else k,
-                                f"unknown field{hint} (expected one of {', '.join(keys)})")
-
-    def finite(self, v: Any, path: str) -> None:
-        """NaN or infinity anywhere in the file is an error: TOML allows them, no field of a scenario does."""
-        if isinstance(v, float) and not math.isfinite(v):
-            raise self.fail(path, f"must be a finite number, got {v}")
-        if isinstance(v, dict):
-            for k, x in v.items():
-                self.finite(x, f"{path}.{k}" if path else k)
-        elif isinstance(v, list):
-            for k, x in enumerate(v):
-                # arrays of tables are addressed by index; a number inside a list of points by the list's key
-                self.finite(x, f"{path}[{k}]" if isinstance(x, dict) else path)
-
-    def table(self, d: dict[str, Any], key: str, path: str, keys: Any, default: Any = ...) -> dict[str, Any]:
-        """A sub-table whose keys must all be known."""
-        v = self.get(d, key, path, dict, default)
-        if isinstance(v, dict):
-            self.known(v, path, keys)
-        return v
-
-    def tables(self, d: dict[str, Any], key: str, path: str, keys: Any) -> list[dict[str, Any]]:
-        """An array of tables whose keys must all be known."""
-        out = self.get(d, key, path, list, [])
-        for k, v in enumerate(out):
-            if not isinstance(v, dict):
-                raise self.fail(f"{path}[{k}]", f"must be a table, got {v!r}")
-            self.known(v, f"{path}[{k}]", keys)
-        return out
-
-    def get(self, d: dict[str, Any], key: str, path: str, kind: type | tuple[type, ...], default: Any = ...) -> Any:
-        if key not in d:
-            if default is ...:
-                raise self.fail(path, "is required")
-            return default
-        v = d[key]
-        if kind is float and isinstance(v, int) and not isinstance(v, bool):
-            v = float(v)
-        if not isinstance(v, kind) or (kind is int and isinstance(v, bool)):
-            names = kind.__name__ if isinstance(kind, type) else " or ".join(k.__name__ for k in kind)
-            raise self.fail(path, f"must be {names}, got {type(v).__name__} {v!r}")
-        if isinstance(v, float) and not math.isfinite(v):
-            raise self.fail(path, "must be finite")
-        return v
-
-    def number(self, d: dict[str, Any], key: str, path: str, default: Any = ..., lo: float = -math.inf,
-               hi: float = math.inf) -> float:
-        v = self.get(d, key, path, float, default)
-        if v is not None and not lo <= v <= hi:
-            raise self.fail(path, f"must be within {lo}..{hi}, got {v}")
-        return v
-
-    def point(self, v: Any, path: str, n: int = 2) -> tuple[float, ...]:
-        if (not isinstance(v, list) or len(v) != n
-                or not all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in v)):
-            raise self.fail(path, f"must be a list of {n} numbers, got {v!r}")
-        return tuple(float(c) for c in v)
-
-    def points(self, d: dict[str, Any], key: str, path: str, n: int = 2, min_len: int = 2) -> tuple:
-        v = self.get(d, key, path, list)
-        if len(v) < min_len:
-            raise self.fail(path, f"needs at least {min_len} points")
-        return tuple(self.point(p, f"{path}", n) for p in v)
-
-
 def parse(text: str, file: str = "<scenario>") -> Scenario:
     """A scenario from TOML text; ScenarioError (file, line, field) for anything wrong. One part per table."""
     raw, r = _load_toml(text, file)
@@ -300,7 +165,7 @@ class MapTable:
     line: int | None
 
 
-def read_map(r: _Reader, raw: dict, file: str) -> MapTable | None:
+def read_map(r: Reader, raw: dict, file: str) -> MapTable | None:
     """``[map]``: the map_server YAML (relative to the scenario file), read now so a bad map is an error at this
     line; the station (map frame, x east y north) turned into the world frame (north, east) and checked against
     the map's cells."""
@@ -389,22 +254,22 @@ def read_radio_file(path: str) -> tuple[dict[str, float], dict[str, float]]:
             {k: v for k, v in loss.items() if k in given})
 
 
-def _load_toml(text: str, file: str) -> tuple[dict, _Reader]:
+def _load_toml(text: str, file: str) -> tuple[dict, Reader]:
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         m = re.search(r"line (\d+)", str(e))
         raise ScenarioError(file, int(m.group(1)) if m else None, "", f"not valid TOML: {e}") from None
-    return raw, _Reader(file, text)
+    return raw, Reader(file, text)
 
 
-def _header_line(r: _Reader, table: str) -> int | None:
+def _header_line(r: Reader, table: str) -> int | None:
     """The line of ``[table]`` (or ``[[table]]``, ``[table.x]``)."""
     header = re.compile(rf"^\s*\[+\s*{re.escape(table)}\s*[.\]]")
     return next((i + 1 for i, ln in enumerate(r.lines) if header.match(ln)), None)
 
 
-def _vehicle_and_seed(r: _Reader, raw: dict) -> tuple[str, int]:
+def _vehicle_and_seed(r: Reader, raw: dict) -> tuple[str, int]:
     """The robot and the seed a scenario (drawn or generated) flies with, range-checked."""
     vehicle = r.get(raw, "vehicle", "vehicle", str, "rover")
     if vehicle not in ("rover", "legged"):
@@ -415,19 +280,33 @@ def _vehicle_and_seed(r: _Reader, raw: dict) -> tuple[str, int]:
     return vehicle, seed
 
 
-def _world(r: _Reader, raw: dict, mt: MapTable | None = None) -> tuple[tuple[float, ...], tuple[Wall, ...], tuple,
+def _world(r: Reader, raw: dict, mt: MapTable | None = None) -> tuple[tuple[float, ...], tuple[Wall, ...], tuple,
                                                                       tuple[Station, ...]]:
     """[world]: bounds, walls, radio-denied zones and ground stations. A map world's walls are its cells, its
     bounds the map's unless given, and its [map] station is the first station."""
     world = r.table(raw, "world", "world", ("bounds", "walls", "denied", "stations"), {} if mt else ...)
     if mt is not None and world.get("walls"):
         raise r.fail("world.walls", "a map world's walls are its occupied cells: draw them on the map")
+    b = _bounds(r, world, mt)
+    walls = _walls(r, world)
+    denied = tuple(r.points(z, "polygon", f"world.denied[{k}].polygon", min_len=3)
+                   for k, z in enumerate(r.tables(world, "denied", "world.denied", ("polygon",))))
+    return b, walls, denied, _stations(r, world, mt)
+
+
+def _bounds(r: Reader, world: dict, mt: MapTable | None) -> tuple[float, ...]:
+    """[world] bounds: [xmin, ymin, xmax, ymax]; a map world's default to the map's, rounded out to the metre."""
     if mt is not None and "bounds" not in world:
         g = mt.site.grid().bounds()
         world = {**world, "bounds": [math.floor(g[0]), math.floor(g[1]), math.ceil(g[2]), math.ceil(g[3])]}
     b = r.get(world, "bounds", "world.bounds", list)
     if len(b) != 4 or not all(isinstance(c, (int, float)) for c in b) or b[0] >= b[2] or b[1] >= b[3]:
         raise r.fail("world.bounds", "must be [xmin, ymin, xmax, ymax] with min < max")
+    return tuple(float(c) for c in b)
+
+
+def _walls(r: Reader, world: dict) -> tuple[Wall, ...]:
+    """[[world.walls]]: polylines with a thickness and a radio loss; no segment of zero length."""
     walls = []
     for k, w in enumerate(r.tables(world, "walls", "world.walls", ("points", "thickness", "attenuation_db"))):
         p = f"world.walls[{k}]"
@@ -437,8 +316,11 @@ def _world(r: _Reader, raw: dict, mt: MapTable | None = None) -> tuple[tuple[flo
                 raise r.fail(f"{p}.points", f"points {j - 1} and {j} are the same: a wall of zero length")
         walls.append(Wall(points, r.number(w, "thickness", f"{p}.thickness", 0.5, 0.01, 20.0),
                           r.number(w, "attenuation_db", f"{p}.attenuation_db", 20.0, 0.0, 200.0)))
-    denied = tuple(r.points(z, "polygon", f"world.denied[{k}].polygon", min_len=3)
-                   for k, z in enumerate(r.tables(world, "denied", "world.denied", ("polygon",))))
+    return tuple(walls)
+
+
+def _stations(r: Reader, world: dict, mt: MapTable | None) -> tuple[Station, ...]:
+    """[[world.stations]]: at least one ground station; a map world's [map] station first unless named here."""
     stations = []
     for k, s in enumerate(r.tables(world, "stations", "world.stations", ("name", "position", "sysid", "power_dbm"))):
         p = f"world.stations[{k}]"
@@ -452,10 +334,10 @@ def _world(r: _Reader, raw: dict, mt: MapTable | None = None) -> tuple[tuple[flo
         stations.insert(0, mt.station)
     if not stations:
         raise r.fail("world.stations", "needs at least one ground station")
-    return tuple(float(c) for c in b), tuple(walls), denied, tuple(stations)
+    return tuple(stations)
 
 
-def _radio(r: _Reader, raw: dict, extra: tuple[str, ...] = ()) -> tuple[RadioParams, dict[str, float]]:
+def _radio(r: Reader, raw: dict, extra: tuple[str, ...] = ()) -> tuple[RadioParams, dict[str, float]]:
     """[radio]: the radio model's parameters (any left out keep their defaults), and those of ``extra`` (a map
     world's wall loss, dB) that it gives."""
     radio_raw = r.table(raw, "radio", "radio", (*RadioParams.__dataclass_fields__, *extra), {})
@@ -469,14 +351,14 @@ def _radio(r: _Reader, raw: dict, extra: tuple[str, ...] = ()) -> tuple[RadioPar
     return RadioParams(**radio_kw), more
 
 
-def _start(r: _Reader, raw: dict) -> tuple[float, float, float]:
+def _start(r: Reader, raw: dict) -> tuple[float, float, float]:
     """[start]: where the robot boots, and its heading."""
     start_raw = r.table(raw, "start", "start", ("position", "yaw_deg"))
     sx, sy = r.point(r.get(start_raw, "position", "start.position", list), "start.position")
     return sx, sy, math.radians(r.number(start_raw, "yaw_deg", "start.yaw_deg", 0.0, -360, 360))
 
 
-def _operator(r: _Reader, raw: dict, stations: tuple[Station, ...]) -> dict:
+def _operator(r: Reader, raw: dict, stations: tuple[Station, ...]) -> dict:
     """[operator]: the scripted operator's station, teleop kind, route, attempts, rejoin, return plan and
     parameters (the Scenario fields they fill, by name)."""
     op = r.table(raw, "operator", "operator", ("station", "teleop", "route", "resume_route", "plan", "params",
@@ -503,7 +385,7 @@ def _operator(r: _Reader, raw: dict, stations: tuple[Station, ...]) -> dict:
             "attempts": attempts, "rejoin": rejoin, "plan": _plan(r, op), "params": params}
 
 
-def _plan(r: _Reader, op: dict) -> tuple[PlanItem, ...]:
+def _plan(r: Reader, op: dict) -> tuple[PlanItem, ...]:
     """operator.plan: the return plan, each item checked against the one table of plan-item ranges."""
     plan = []
     for k, it in enumerate(r.get(op, "plan", "operator.plan", list, [])):
@@ -530,7 +412,7 @@ def _plan(r: _Reader, op: dict) -> tuple[PlanItem, ...]:
     return tuple(plan)
 
 
-def _events(r: _Reader, raw: dict, stations: tuple[Station, ...]) -> tuple[Event, ...]:
+def _events(r: Reader, raw: dict, stations: tuple[Station, ...]) -> tuple[Event, ...]:
     """[[events]]: timed events, in time order."""
     events = []
     for k, ev in enumerate(r.tables(raw, "events", "events", ("t", "action", "duration", "station", "name",
@@ -558,7 +440,7 @@ def _events(r: _Reader, raw: dict, stations: tuple[Station, ...]) -> tuple[Event
     return tuple(sorted(events, key=lambda e: e.t))
 
 
-def _criteria(r: _Reader, raw: dict) -> Criteria:
+def _criteria(r: Reader, raw: dict) -> Criteria:
     """[criteria]: what a run must show to pass."""
     crit_raw = r.table(raw, "criteria", "criteria", Criteria.__dataclass_fields__, {})
     reasons = r.get(crit_raw, "chain_reasons", "criteria.chain_reasons", list, [])
@@ -582,7 +464,7 @@ def _criteria(r: _Reader, raw: dict) -> Criteria:
     return crit
 
 
-def _check_plan_item(r: _Reader, item: PlanItem, path: str) -> None:
+def _check_plan_item(r: Reader, item: PlanItem, path: str) -> None:
     """The same field ranges the vehicle checks a mission item against (link/plan_items.py)."""
     frame = LOCAL_FRAMES[0] if item.command == NAV_WAYPOINT else MISSION_FRAME
     fault = check_fields(item.command, frame, (item.param1, item.param2, item.param3, item.param4, item.x, item.y,
@@ -592,7 +474,7 @@ def _check_plan_item(r: _Reader, item: PlanItem, path: str) -> None:
         raise r.fail(f"{path}.{keys[fault.field]}" if fault.field in keys else path, fault.message)
 
 
-def _param(r: _Reader, name: str, value: float, path: str) -> float:
+def _param(r: Reader, name: str, value: float, path: str) -> float:
     """A vehicle parameter as the vehicle would take it: a known name, within its range."""
     if name not in BY_NAME:
         close = difflib.get_close_matches(name, list(BY_NAME), 1, 0.6)

@@ -232,3 +232,32 @@ def test_the_private_import_check_finds_one():
     assert _private_imports("sim.policies.smartrtl", "from vehicle.trail import _douglas_peucker, seg_dist\n") == \
         ["sim.policies.smartrtl: from vehicle.trail import _douglas_peucker"]
     assert _private_imports("vehicle.trail", "from __future__ import annotations\nfrom vehicle import __doc__\n") == []
+
+
+# ----- modules found by import, never by a string -----------------------------------------------------------
+def _string_imports(source: str) -> list[str]:
+    """Calls that load a module named by a string (``importlib.import_module(...)``, ``__import__(...)``): the
+    import graph above cannot see what they load."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Call):
+            f = node.func
+            name = f.attr if isinstance(f, ast.Attribute) else f.id if isinstance(f, ast.Name) else ""
+            if name in ("import_module", "__import__"):
+                found.append(f"line {node.lineno}: {ast.unparse(node)}")
+    return found
+
+
+def test_no_module_is_loaded_from_a_string():
+    """issue 39: a plant draws its pictures with a module it imports (``Plant.pictures``), not one named by a
+    string that no layout check sees."""
+    found = {m: hits for m, path in _project_modules().items()
+             if (hits := _string_imports(path.read_text(encoding="utf-8")))}
+    assert found == {}
+
+
+def test_the_string_import_check_finds_one():
+    assert _string_imports("import importlib\nreport = importlib.import_module(plant.report)\n") == \
+        ["line 2: importlib.import_module(plant.report)"]
+    assert _string_imports("m = __import__('sim.report')\n") == ["line 1: __import__('sim.report')"]
+    assert _string_imports("from sim import report\n") == []

@@ -3,8 +3,9 @@
 ``Vehicle`` is everything onboard except MAVLink framing, and provides the one port every room outside it talks
 through (``vehicle.port.VehiclePort``: the command authority, a status snapshot per tick, the event queue);
 ``vehicle.endpoint.Endpoint`` translates messages into its methods. It is the command authority: every
-state-changing request (take or give up the root, claim or expire a lease, arm, hold, teleop, a return plan, a
-parameter) is decided by the lease book and its effect kept here, with what the endpoint must announce. It is made of
+state-changing request (take or give up the root, claim or expire a lease, arm, hold, teleop, a return plan) is
+decided by the lease book and its effect kept, with what the endpoint must announce (``vehicle.authority``, which
+``Vehicle`` extends; a parameter is set here, as it reaches the parts too). It is made of
 
     control.ControlLoop         the 50 Hz tick: sensors -> estimator -> trail, lease triggers, actuators
     contingency.ReturnDriver    what drives a return-service lease: the plan's service, or an injected behaviour
@@ -21,40 +22,27 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import replace
 
-from vehicle.contingency import Contingency, ReturnDriver, blocks_for
+from vehicle.authority import Authority
+from vehicle.contingency import Contingency, ReturnDriver
 from vehicle.control import ControlLoop
 from vehicle.io import RobotDriver
-from vehicle.lease import (
-    Check,
-    ExpireReason,
-    Holder,
-    LeaseBook,
-    LeaseConfig,
-    LeaseEvent,
-    LeaseId,
-    Outcome,
-    QueuedCommand,
-    RejectReason,
-    ServiceBlock,
-    Verdict,
-    epoch_before,
-)
-from vehicle.lease_terms import State, refused
+from vehicle.lease import Holder, LeaseConfig
+from vehicle.lease_terms import State
 from vehicle.linkmap import MapConfig
 from vehicle.params import Params
 from vehicle.port import DT, NOTHING, Announcements, Status
 from vehicle.radio_status import STALE_S as RSSI_STALE_S
-from vehicle.service import PlanItem, blocks_from_items, default_plan
+from vehicle.service import default_plan
 from vehicle.teleop import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, SETPOINT_TTL, Setpoint, velocity_to_command
 
 __all__ = ["DT", "MAX_TELEOP_SPEED", "MAX_TELEOP_YAW_RATE", "SETPOINT_TTL", "Contingency", "Setpoint", "State",
            "Vehicle", "run", "velocity_to_command"]
 
 
-class Vehicle:
-    """The onboard state machine around the pure parts. Mutable: it is the shell that owns the current book.
+class Vehicle(Authority):
+    """The onboard state machine around the pure parts: the command authority over the lease book
+    (``vehicle.authority.Authority``), the parts that act on it, the snapshot and the link as heard. Mutable.
 
     It provides ``vehicle.port.VehiclePort``; nothing outside the core changes its fields."""
 
@@ -64,25 +52,9 @@ class Vehicle:
         None derives it from ``seed``, as only the lockstep simulator may (§3.1). ``contingency``: a link-loss
         behaviour to fly instead of the return plan (the simulator's baselines)."""
         self.driver = driver
-        self.params = params
-        self.seed = seed
-        self.contingency = contingency
-        self.on_epoch: Callable[[int], str | None] | None = None  # told of each epoch issued, before its ACK
         self.home = (pose[0], pose[1])
         self.t = t
-        self.book = LeaseBook(LeaseConfig.from_params(params), plan=self._blocks(default_plan(params)),
-                              last_epoch=None if boot_epoch is None else epoch_before(boot_epoch))
-        self.plan_items: tuple[PlanItem, ...] = ()  # the uploaded return plan (empty: the default plan)
-        # what the operator's executed commands left: the actuators act on these
-        self.armed = False
-        self.holding = False  # the operator asked for HOLD (shown as AUTO_LOITER until it drives again)
-        self.setpoint: Setpoint | None = None
-        self.key_bound = False  # a signing key is installed: the root only by an explicit signed request (§4.1)
-        # everything the endpoint must announce, drained by it each tick
-        self.events: list[LeaseEvent] = []
-        self.event_log: list[LeaseEvent] = []  # every transition since boot, for the record
-        self.notices: list[str] = []
-        self.commands_rejected = 0  # rejections are never silent: each is answered and counted
+        super().__init__(params, seed, contingency, boot_epoch)
         self.returns = ReturnDriver(self)
         self.control = ControlLoop(self, self.returns, pose, t)
         # the parts' own objects, shared: the estimator, the trail and the plan items reached (MISSION_ITEM_REACHED,
@@ -178,57 +150,6 @@ class Vehicle:
         """The robot reports its own arming (a companion's autopilot): the vehicle follows it."""
         self.armed = armed
 
-    # ----- lease transitions -------------------------------------------------------------------------------
-    def apply(self, out: Outcome) -> None:
-        """Take the book a transition made, announce its events and execute the commands it released."""
-        if out.book is self.book and not out.events and not out.released:
-            return  # nothing happened (most ticks): the same book, no event, no command
-        issued = out.book.last_epoch != self.book.last_epoch
-        self.book = out.book
-        if issued and self.on_epoch is not None and out.book.last_epoch is not None:
-            problem = self.on_epoch(out.book.last_epoch)  # kept before anyone hears of the new epoch
-            if problem:
-                self.notices.append(problem)
-        self.events.extend(out.events)
-        self.event_log.extend(out.events)
-        for ev in out.events:
-            self.notices.append(ev.describe())
-        for q in out.released:
-            self._execute(q.payload, q.lease, q.sender)
-
-    def _blocks(self, blocks: tuple[ServiceBlock, ...]) -> tuple[ServiceBlock, ...]:
-        return blocks_for(self.contingency, blocks)
-
-    def refuses(self, sender: int) -> bool:
-        """Someone else owns the vehicle: a state change from ``sender`` is refused, and counted."""
-        if self.book.owner is not None and self.book.owner != sender:
-            self.commands_rejected += 1
-            return True
-        return False
-
-    def verdict(self, sender: int) -> Check:
-        """What the lease rules say of a state change from ``sender`` under its last claimed lease now; nothing is
-        done or counted."""
-        return self.book.check(sender)
-
-    def grants(self, sender: int, compid: int, t: float) -> bool:
-        """Whether LEASE_AUTOGRANT would make ``sender`` the owner now; nothing is granted."""
-        return sender != self.book.owner and self.book.admit(sender, compid, t, self.seed).book.owner == sender
-
-    def _reject(self, chk: Check) -> Check:
-        self.commands_rejected += 1
-        return chk
-
-    def _answer(self, out: Outcome, chk: Check) -> Check:
-        self.apply(out)
-        return chk if chk.executes else self._reject(chk)
-
-    def admit(self, sender: int, compid: int, t: float) -> None:
-        """A plain client's state-changing command may grant it the root (LEASE_AUTOGRANT)."""
-        if self.key_bound:
-            return  # with a signing key, LEASE_AUTOGRANT does nothing: the owner is bound to the key
-        self.apply(self.book.admit(sender, compid, t, self.seed))
-
     def heard(self, sysid: int, t: float, seq: int | None = None) -> None:
         """A frame from ``sysid`` with MAVLink sequence number ``seq``: the owner's feed the link watch."""
         self.book = self.book.heard(sysid, t, seq)
@@ -253,141 +174,6 @@ class Vehicle:
         nan (unknown: no radio, or it stopped reporting)."""
         r = self.rssi_report
         return r[1] if r is not None and t - r[0] <= RSSI_STALE_S else math.nan
-
-    # ----- the root and the execution leases ---------------------------------------------------------------
-    def acquire(self, sender: int, compid: int, t: float, allow_takeover: bool) -> Check:
-        why = self.book.take_refusal(sender, t)
-        if why is not None:
-            return self._reject(refused(RejectReason.NOT_IN_CONTROL, why))
-        if self.book.owner == sender:
-            self.book = replace(self.book, takeover_allowed=allow_takeover)
-            return Check(Verdict.EXECUTE, self.book.current_id)
-        self.apply(self.book.acquire(sender, compid, t, self.seed, allow_takeover))
-        self.setpoint = None
-        return Check(Verdict.EXECUTE, self.book.current_id)
-
-    def release(self, sender: int, t: float) -> Check:
-        if self.book.owner != sender:
-            return self._reject(refused(RejectReason.NOT_IN_CONTROL, "not the owner"))
-        self.apply(self.book.release(sender, t))
-        self.setpoint = None
-        return Check(Verdict.EXECUTE)
-
-    def claim(self, sender: int, epoch: int, index: int, t: float) -> Check:
-        return self._answer(*self.book.claim(sender, epoch, index, t))
-
-    def expire(self, sender: int, epoch: int, index: int, t: float) -> Check:
-        return self._answer(*self.book.expire(sender, epoch, index, t))
-
-    def rtl(self, sender: int, compid: int, t: float) -> Check:
-        """RTL button or RTL mode: OPERATOR_EXPIRE of the operator lease, so the return plan runs."""
-        self.admit(sender, compid, t)
-        return self._answer(*self.book.expire_current(sender, t))
-
-    def take_manual(self, sender: int, compid: int, t: float) -> Check:
-        """A plain client switching to a manual mode (or HOLD) takes the operator lease back: it claims the
-        unclaimed operator lease, or a newer lease over a running return (NEWER_LEASE). Only the owner can."""
-        self.admit(sender, compid, t)
-        book = self.book
-        if book.owner is None or book.owner != sender or book.epoch is None:
-            return self._reject(refused(RejectReason.NOT_IN_CONTROL, "not the owner"))
-        cur = book.current
-        assert cur is not None
-        if cur.holder is Holder.OPERATOR and not cur.claimed:
-            return self.claim(sender, book.epoch, -1, t)  # resume: the fresh operator lease
-        if cur.holder is Holder.OPERATOR and book.claimed_by(sender) == book.current_id:
-            return book.check(sender)  # already driving under the current lease
-        return self.claim(sender, book.epoch, book.next_index, t)  # over a return: a newer lease
-
-    # ----- commands under a lease --------------------------------------------------------------------------
-    def command(self, sender: int, compid: int, t: float, payload: tuple) -> Check:
-        """A standard state-changing command under the sender's last claimed lease (§3.4)."""
-        self.admit(sender, compid, t)
-        chk = self.book.check(sender)
-        if chk.verdict is Verdict.QUEUE and chk.lease is not None:
-            self.book = self.book.enqueue(QueuedCommand(chk.lease, sender, payload))
-            return chk
-        if not chk.executes:
-            return self._reject(chk)
-        self._execute(payload, chk.lease, sender)
-        return chk
-
-    def _execute(self, payload: tuple, lease: LeaseId | None, sender: int) -> None:
-        """What an executed command does: ``("teleop", speed, yaw_rate)``, ``("hold",)`` or ``("arm", on)``."""
-        kind = payload[0]
-        if kind == "teleop" and lease is not None:
-            _, speed, yaw_rate = payload
-            self.setpoint = Setpoint(speed, yaw_rate, lease, self.t + SETPOINT_TTL, sender)
-            if speed or yaw_rate:
-                self.holding = False
-        elif kind == "hold":
-            self.setpoint = None
-            self.holding = True
-        elif kind == "arm":
-            self.armed = bool(payload[1])
-            if not self.armed:
-                self.setpoint = None
-
-    # ----- the return plan and the parameters --------------------------------------------------------------
-    def plan_leases(self) -> int:
-        """How many execution leases the stored return plan makes."""
-        return len(self.book.plan)
-
-    def set_plan(self, items: tuple[PlanItem, ...], t: float) -> str | None:
-        """A mission upload is the return plan: scheduled as leases behind the operator lease. Returns why not."""
-        try:
-            blocks = blocks_from_items(items, self.params) if items else default_plan(self.params)
-        except ValueError as e:
-            return str(e)
-        if not blocks:
-            blocks = default_plan(self.params)
-        self.plan_items = tuple(items)
-        self.apply(self.book.schedule_plan(self._blocks(blocks), t))
-        return None
-
-    def return_now(self, items: tuple[PlanItem, ...], sender: int, compid: int, t: float) -> Check:
-        """MAV_CMD_NAV_RETURN_TO_LINK as a command: run these items as one return block now; the stored plan
-        stays the one re-armed afterwards."""
-        self.admit(sender, compid, t)
-        cur = self.book.current
-        if self.book.owner != sender or cur is None:
-            return self._reject(refused(RejectReason.NOT_IN_CONTROL, "not the owner"))
-        if cur.holder is not Holder.OPERATOR:
-            return Check(Verdict.EXECUTE, self.book.current_id, detail="a return is already running")
-        self.apply(self.book.schedule_plan(self._blocks(blocks_from_items(items, self.params)), t, store=False))
-        return self.rtl(sender, compid, t)
-
-    def preempt(self, t: float, reason: ExpireReason, why: str) -> bool:
-        """The robot left the vehicle's hands from outside the lease book (companion mode: an autopilot's pilot or
-        failsafe changed its mode, or the autopilot stopped answering): the current lease and its chain end with
-        ``reason``, said in words by ``why``, and a fresh operator lease waits for a claim. A return never fights
-        whoever took the robot. True if a lease ended (and ``why`` was announced)."""
-        out = self.book.interrupt(t, reason)
-        if not out.events:
-            return False
-        self.notices.append(why)
-        self.setpoint = None
-        self.apply(out)
-        return True
-
-    def set_plan_start(self, seq: int, sender: int, compid: int, t: float) -> str | None:
-        """MISSION_SET_CURRENT / DO_SET_MISSION_CURRENT: the return plan is scheduled from the block holding
-        item ``seq`` on. Only while an operator lease is current, and only by the owner."""
-        if self.refuses(sender):
-            return f"GCS {self.book.owner} is in control"
-        items = self.plan_items
-        if not 0 <= seq < max(1, len(items)):
-            return f"item {seq} does not exist"
-        cur = self.book.current
-        if cur is not None and cur.holder is not Holder.OPERATOR:
-            return "a return is running"
-        if not items:
-            return None
-        blocks = blocks_from_items(items[seq:], self.params)
-        # keep the seq numbers of the whole mission
-        blocks = tuple(replace(b, payload=tuple(replace(it, seq=it.seq + seq) for it in b.payload)) for b in blocks)
-        self.apply(self.book.schedule_plan(self._blocks(blocks), t, store=False))
-        return None
 
     def set_param(self, name: str, value: float) -> float:
         """Store a parameter (ParamError leaves the old value) and apply it to the rules at once."""

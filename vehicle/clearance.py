@@ -263,16 +263,50 @@ def keep_clear(points: np.ndarray, speeds: np.ndarray, free: FreeSpace | None,
     if float(np.abs(points).max()) + 2.0 * radius + HORIZON > _MAX_COORD:
         return points, speeds
     original, speeds0 = points, speeds
+    points, speeds, seg, cum, m = _split_at_horizon(points, speeds)
+    p, owner, vertex, s = _samples(points, seg, cum, m)
+    side = _Sideways(p, s, _Window(free, p, radius), radius)
+    d0 = side.window.nearest(p)
+    want = np.flatnonzero(d0 < radius)
+    if len(want) == 0:
+        return original, speeds0
+    shift, dist, took = _first_moves(side, want, d0)
+    if took:
+        _despike(side, shift, dist, d0)
+    if np.any(shift != 0.0):
+        _lean(side, shift, dist, d0, s)
+    out = p + shift[:, None] * side.normal
+    alive = _untangle(side, shift, dist, d0, out)
+    moved = shift != 0.0
+    if not moved.any():
+        return original, speeds0
+    keep = vertex | moved
+    keep[1:] |= moved[:-1]
+    keep[:-1] |= moved[1:]
+    keep[0] = keep[-1] = True
+    keep &= alive
+    pts = np.vstack([out[keep], points[m + 1:]])
+    return pts, np.concatenate([speeds[owner[keep]], speeds[m + 1:]])
+
+
+def _split_at_horizon(points: np.ndarray, speeds: np.ndarray):
+    """(points, speeds, segment lengths, distance along at each point, m): ``m`` the segments that start within
+    HORIZON; when the last of them ends far beyond, it is split at HORIZON (the work stays bounded)."""
     seg = np.hypot(*np.diff(points, axis=0).T)
     cum = np.concatenate([[0.0], np.cumsum(seg)])
-    m = min(max(1, int(np.searchsorted(cum, HORIZON, side="left"))), n - 1)  # segments that start within HORIZON
-    if cum[m] > HORIZON + CELL:  # the last of them ends far beyond: split it at HORIZON (the work stays bounded)
+    m = min(max(1, int(np.searchsorted(cum, HORIZON, side="left"))), len(points) - 1)
+    if cum[m] > HORIZON + CELL:
         u = (HORIZON - cum[m - 1]) / seg[m - 1]
         points = np.vstack([points[:m], points[m - 1] + u * (points[m] - points[m - 1]), points[m:]])
         speeds = np.concatenate([speeds[:m], speeds[m - 1:]])
-        n += 1
         seg = np.concatenate([seg[:m - 1], [HORIZON - cum[m - 1], cum[m] - HORIZON], seg[m:]])
         cum = np.concatenate([cum[:m], [HORIZON], cum[m:]])
+    return points, speeds, seg, cum, m
+
+
+def _samples(points: np.ndarray, seg: np.ndarray, cum: np.ndarray, m: int):
+    """The first ``m`` segments resampled every CELL, and the end of the last: (samples, the point each lies
+    after, whether it is a point of the route itself, its distance along)."""
     counts = np.maximum(1, np.ceil(seg[:m] / CELL).astype(np.int64))
     owner = np.repeat(np.arange(m), counts)  # the segment each sample lies on
     first = np.concatenate([[0], np.cumsum(counts)[:-1]])
@@ -281,122 +315,158 @@ def keep_clear(points: np.ndarray, speeds: np.ndarray, free: FreeSpace | None,
     owner = np.concatenate([owner, [m]])
     vertex = np.concatenate([u == 0.0, [True]])
     s = np.concatenate([cum[owner[:-1]] + u * seg[owner[:-1]], [cum[m]]])
-    k = len(p)
-    # the grid around the samples, dense: every cell any candidate's nearest-occupied search can touch
-    reach = int(math.ceil(radius / CELL)) + 1
-    margin = radius + (reach + 1) * CELL
-    ix0 = int(math.floor((p[:, 0].min() - margin) / CELL))
-    iy0 = int(math.floor((p[:, 1].min() - margin) / CELL))
-    grid = free.window(ix0, iy0, int(math.floor((p[:, 0].max() + margin) / CELL)) - ix0 + 1,
-                       int(math.floor((p[:, 1].max() + margin) / CELL)) - iy0 + 1)
-    ox, oy = np.meshgrid(np.arange(-reach, reach + 1), np.arange(-reach, reach + 1), indexing="ij")
-    near = (np.maximum(np.abs(ox) - 1, 0) ** 2 + np.maximum(np.abs(oy) - 1, 0) ** 2) * CELL * CELL <= radius * radius
-    ox, oy = ox[near], oy[near]
-    ny = grid.shape[1]
-    occupied = ((grid & OCCUPIED) != 0).ravel()  # the window flat: a cell's neighbours are fixed index offsets
-    around = ox * ny + oy
+    return p, owner, vertex, s
 
-    def cells(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return np.floor(q[..., 0] / CELL).astype(np.int64) - ix0, np.floor(q[..., 1] / CELL).astype(np.int64) - iy0
 
-    def nearest(q: np.ndarray) -> np.ndarray:
+class _Window:
+    """The grid around the samples, dense: every cell any candidate's nearest-occupied search can touch."""
+
+    def __init__(self, free: FreeSpace, p: np.ndarray, radius: float) -> None:
+        self.radius = radius
+        reach = int(math.ceil(radius / CELL)) + 1
+        margin = radius + (reach + 1) * CELL
+        self.ix0 = ix0 = int(math.floor((p[:, 0].min() - margin) / CELL))
+        self.iy0 = iy0 = int(math.floor((p[:, 1].min() - margin) / CELL))
+        self.grid = free.window(ix0, iy0, int(math.floor((p[:, 0].max() + margin) / CELL)) - ix0 + 1,
+                                int(math.floor((p[:, 1].max() + margin) / CELL)) - iy0 + 1)
+        ox, oy = np.meshgrid(np.arange(-reach, reach + 1), np.arange(-reach, reach + 1), indexing="ij")
+        near = ((np.maximum(np.abs(ox) - 1, 0) ** 2 + np.maximum(np.abs(oy) - 1, 0) ** 2) * CELL * CELL
+                <= radius * radius)
+        ox, oy = ox[near], oy[near]
+        self.ny = self.grid.shape[1]
+        self.occupied = ((self.grid & OCCUPIED) != 0).ravel()  # flat: a cell's neighbours are fixed index offsets
+        self.around = ox * self.ny + oy
+
+    def cells(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return (np.floor(q[..., 0] / CELL).astype(np.int64) - self.ix0,
+                np.floor(q[..., 1] / CELL).astype(np.int64) - self.iy0)
+
+    def nearest(self, q: np.ndarray) -> np.ndarray:
         """Distance from each position to the centre of the nearest occupied cell, capped at ``radius``."""
-        cx, cy = cells(q)
+        ny = self.ny
+        cx, cy = self.cells(q)
         flat = q.reshape(-1, 2)
-        at, nb = np.nonzero(occupied[(cx * ny + cy).reshape(-1, 1) + around])  # (position, neighbour) pairs
-        out = np.full(len(flat), radius)
+        at, nb = np.nonzero(self.occupied[(cx * ny + cy).reshape(-1, 1) + self.around])  # (position, neighbour)
+        out = np.full(len(flat), self.radius)
         if len(at):
-            cell = (cx * ny + cy).reshape(-1)[at] + around[nb]
-            d = np.hypot((cell // ny + ix0 + 0.5) * CELL - flat[at, 0], (cell % ny + iy0 + 0.5) * CELL - flat[at, 1])
+            cell = (cx * ny + cy).reshape(-1)[at] + self.around[nb]
+            d = np.hypot((cell // ny + self.ix0 + 0.5) * CELL - flat[at, 0],
+                         (cell % ny + self.iy0 + 0.5) * CELL - flat[at, 1])
             np.minimum.at(out, at, d)
         return out.reshape(q.shape[:-1])
 
-    def clear_cell(q: np.ndarray) -> np.ndarray:
-        cx, cy = cells(q)
-        return grid[cx, cy] == FREE
+    def clear_cell(self, q: np.ndarray) -> np.ndarray:
+        cx, cy = self.cells(q)
+        return self.grid[cx, cy] == FREE
 
-    d0 = nearest(p)
-    want = np.flatnonzero(d0 < radius)
-    if len(want) == 0:
-        return original, speeds0
-    tangent = np.zeros_like(p)
-    tangent[1:-1] = p[2:] - p[:-2]
-    tangent[0], tangent[-1] = p[1] - p[0], p[-1] - p[-2]
-    norm = np.hypot(tangent[:, 0], tangent[:, 1])
-    normal = np.where(norm[:, None] > 1e-12, np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
-                      / np.maximum(norm, 1e-12)[:, None], 0.0)
-    step = 0.5 * CELL
-    half = max(1, int(math.floor(radius / step + 1e-9)))
-    offsets = np.arange(-half, half + 1) * step  # index ``half`` is no move
-    # a move fades in from the route's fixed ends: no further sideways than the sample is along from either
-    fade = np.minimum(s, s[-1] - s)
-    fade[0] = fade[-1] = 0.0
 
-    def candidates(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+class _Sideways:
+    """The moves a sample may take: along the route's normal, both ways, in steps of half a cell up to the
+    clearance, no further sideways than the sample is along from either fixed end of the route."""
+
+    def __init__(self, p: np.ndarray, s: np.ndarray, window: _Window, radius: float) -> None:
+        self.p, self.window, self.radius = p, window, radius
+        tangent = np.zeros_like(p)
+        tangent[1:-1] = p[2:] - p[:-2]
+        tangent[0], tangent[-1] = p[1] - p[0], p[-1] - p[-2]
+        norm = np.hypot(tangent[:, 0], tangent[:, 1])
+        self.tangent = tangent
+        self.normal = np.where(norm[:, None] > 1e-12, np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
+                               / np.maximum(norm, 1e-12)[:, None], 0.0)
+        self.step = 0.5 * CELL
+        self.half = max(1, int(math.floor(radius / self.step + 1e-9)))
+        self.offsets = np.arange(-self.half, self.half + 1) * self.step  # index ``half`` is no move
+        # a move fades in from the route's fixed ends: no further sideways than the sample is along from either
+        fade = np.minimum(s, s[-1] - s)
+        fade[0] = fade[-1] = 0.0
+        self.fade = fade
+
+    def candidates(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For samples ``rows``: whether each offset may be taken (reached through free cells, within the fade)
         and its clearance."""
-        q = p[rows, None, :] + offsets[None, :, None] * normal[rows, None, :]
-        ok = clear_cell(q)
+        half, offsets = self.half, self.offsets
+        q = self.p[rows, None, :] + offsets[None, :, None] * self.normal[rows, None, :]
+        ok = self.window.clear_cell(q)
         # reachable: every offset between here and it is a free cell too (a move never jumps a wall)
         ok[:, half + 1:] = np.cumprod(ok[:, half + 1:], axis=1).astype(bool)
         ok[:, :half] = np.cumprod(ok[:, :half][:, ::-1], axis=1)[:, ::-1].astype(bool)
-        ok &= np.abs(offsets)[None, :] <= fade[rows, None] + 1e-9
+        ok &= np.abs(offsets)[None, :] <= self.fade[rows, None] + 1e-9
         ok[:, half] = True
-        return ok, nearest(q)
+        return ok, self.window.nearest(q)
 
-    shift = np.zeros(k)
+    def take(self, rows: np.ndarray, moves: np.ndarray, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For samples ``rows``: whether each may take its move in ``moves`` (reachable, and keeping at least
+        ``floor`` of clearance), and the clearance it would have there."""
+        ok, d = self.candidates(rows)
+        j = self.half + np.round(moves / self.step).astype(np.int64)
+        dj = d[np.arange(len(rows)), j]
+        return ok[np.arange(len(rows)), j] & (dj >= floor), dj
+
+
+def _first_moves(side: _Sideways, want: np.ndarray, d0: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(move, clearance) of every sample, and whether any moved: for each of ``want`` (short of the clearance) the
+    least move that reaches the clearance, else the most clearance (ties: the smaller move), if it is a gain of at
+    least GAIN; the others stay."""
+    radius, offsets = side.radius, side.offsets
+    shift = np.zeros(len(side.p))
     dist = d0.copy()
-    ok, d = candidates(want)
+    ok, d = side.candidates(want)
     rows = np.arange(len(want))
-    # the least move that reaches the clearance, else the most clearance (ties: the smaller move), if it is a gain
     goal = ok & (d >= radius)
     score = np.where(goal, 10.0 * radius - np.abs(offsets)[None, :],
                      np.where(ok, d - 1e-6 * np.abs(offsets)[None, :], -np.inf))
     best = np.argmax(score, axis=1)
     take = goal[rows, best] | (d[rows, best] >= d0[want] + GAIN - 1e-9)
-    best = np.where(take, best, half)
+    best = np.where(take, best, side.half)
     shift[want] = offsets[best]
     dist[want] = d[rows, best]
-    if take.any():
-        # a move its neighbours do not share is the grid's noise, not a wall (a wall within the clearance pushes
-        # every sample that comes near it): each sample takes the median move of the five around it, where it may
-        despike = np.median(np.lib.stride_tricks.sliding_window_view(np.pad(shift, 2, mode="edge"), 5), axis=1)
-        change = np.flatnonzero(despike != shift)
-        if len(change):
-            ok, d = candidates(change)
-            j = half + np.round(despike[change] / step).astype(np.int64)
-            dj = d[np.arange(len(change)), j]
-            fine = ok[np.arange(len(change)), j] & (dj >= np.minimum(radius, d0[change]))
-            shift[change] = np.where(fine, despike[change], 0.0)
-            dist[change] = np.where(fine, dj, d0[change])
-    if np.any(shift != 0.0):
-        # neighbours lean the same way (where both ways are wanted, neither), where that is free and keeps, or
-        # reaches, the clearance
-        up, down = _spread(np.maximum(shift, 0.0), s), _spread(np.maximum(-shift, 0.0), s)
-        lean = np.where(down <= 0.0, up, np.where(up <= 0.0, -down, 0.0))
-        lean = np.trunc(lean / step + 1e-9) * step
-        more = np.flatnonzero((np.abs(lean) > np.abs(shift) + 1e-9) & (lean * shift >= 0.0))
-        if len(more):
-            ok, d = candidates(more)
-            j = half + np.round(lean[more] / step).astype(np.int64)
-            dj = d[np.arange(len(more)), j]
-            fine = ok[np.arange(len(more)), j] & (dj >= np.minimum(radius, np.maximum(d0[more], dist[more])))
-            shift[more[fine]] = lean[more[fine]]
-            dist[more[fine]] = dj[fine]
-    out = p + shift[:, None] * normal
-    # the straight line between neighbours stays in free cells and goes forward (from one end to the other, and
-    # along the route where each end lies). A line that leaves free cells (a move toward the inside of a bend can
-    # cross it) sends its moved ends back. A line that goes backward (the inside of a bend, or two crumbs a few cm
-    # apart moved by slightly different normals) loses a moved end instead: sent back, the crumb would stay between
-    # moved neighbours, a zigzag of 0.5 m legs the follower crawls through (gen:mine rover seed 132 returned at
-    # 0.63 m/s where it had driven 1.2)
+    return shift, dist, bool(take.any())
+
+
+def _despike(side: _Sideways, shift: np.ndarray, dist: np.ndarray, d0: np.ndarray) -> None:
+    """A move its neighbours do not share is the grid's noise, not a wall (a wall within the clearance pushes
+    every sample that comes near it): each sample takes the median move of the five around it, where it may."""
+    despike = np.median(np.lib.stride_tricks.sliding_window_view(np.pad(shift, 2, mode="edge"), 5), axis=1)
+    change = np.flatnonzero(despike != shift)
+    if len(change):
+        fine, dj = side.take(change, despike[change], np.minimum(side.radius, d0[change]))
+        shift[change] = np.where(fine, despike[change], 0.0)
+        dist[change] = np.where(fine, dj, d0[change])
+
+
+def _lean(side: _Sideways, shift: np.ndarray, dist: np.ndarray, d0: np.ndarray, s: np.ndarray) -> None:
+    """Neighbours lean the same way (where both ways are wanted, neither), where that is free and keeps, or
+    reaches, the clearance."""
+    step = side.step
+    up, down = _spread(np.maximum(shift, 0.0), s), _spread(np.maximum(-shift, 0.0), s)
+    lean = np.where(down <= 0.0, up, np.where(up <= 0.0, -down, 0.0))
+    lean = np.trunc(lean / step + 1e-9) * step
+    more = np.flatnonzero((np.abs(lean) > np.abs(shift) + 1e-9) & (lean * shift >= 0.0))
+    if len(more):
+        fine, dj = side.take(more, lean[more], np.minimum(side.radius, np.maximum(d0[more], dist[more])))
+        shift[more[fine]] = lean[more[fine]]
+        dist[more[fine]] = dj[fine]
+
+
+def _untangle(side: _Sideways, shift: np.ndarray, dist: np.ndarray, d0: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """The samples kept (the others dropped) so that the straight line between neighbours stays in free cells and
+    goes forward (from one end to the other, and along the route where each end lies); ``shift``, ``dist`` and
+    ``out`` updated where a moved sample is sent back.
+
+    A line that leaves free cells (a move toward the inside of a bend can cross it) sends its moved ends back. A
+    line that goes backward (the inside of a bend, or two crumbs a few cm apart moved by slightly different
+    normals) loses a moved end instead: sent back, the crumb would stay between moved neighbours, a zigzag of
+    0.5 m legs the follower crawls through (gen:mine rover seed 132 returned at 0.63 m/s where it had driven
+    1.2)."""
+    p, tangent = side.p, side.tangent
+    k = len(p)
     alive = np.ones(k, dtype=bool)
     for _ in range(2 * k):
         moved = shift != 0.0
         at = np.flatnonzero(alive)
         a, b = at[:-1], at[1:]
         involved = moved[a] | moved[b]
-        walled = ~clear_cell(0.5 * (out[a] + out[b])) & involved
+        walled = ~side.window.clear_cell(0.5 * (out[a] + out[b])) & involved
         if walled.any():
             back = np.zeros(k, dtype=bool)
             back[a[walled]] = True
@@ -416,13 +486,4 @@ def keep_clear(points: np.ndarray, speeds: np.ndarray, free: FreeSpace | None,
             shift[drop], dist[drop], out[drop] = 0.0, d0[drop], p[drop]
             continue
         alive[drop] = False
-    moved = shift != 0.0
-    if not moved.any():
-        return original, speeds0
-    keep = vertex | moved
-    keep[1:] |= moved[:-1]
-    keep[:-1] |= moved[1:]
-    keep[0] = keep[-1] = True
-    keep &= alive
-    pts = np.vstack([out[keep], points[m + 1:]])
-    return pts, np.concatenate([speeds[owner[keep]], speeds[m + 1:]])
+    return alive

@@ -21,7 +21,7 @@ from vehicle.lease_terms import State
 from vehicle.navigation import FollowerConfig
 from vehicle.port import VehiclePort
 from vehicle.returning import Way
-from vehicle.service import NAV_LOITER_TIME, NAV_WAYPOINT, ServiceState
+from vehicle.service import NAV_LOITER_TIME, NAV_WAYPOINT, ServiceState, ServiceStep
 from vehicle.service import displacement as block_displacement
 from vehicle.service import start as start_block
 from vehicle.service import step as step_block
@@ -139,43 +139,62 @@ class ReturnDriver:
         self.heard_again = self.heard_again or book.link.heard_again(t)
         try:
             if fresh:
-                resume = None
-                if self.way is not None and self.way_chain == cur.chain:
-                    resume = self.way.resumed((x, y), self.way.length)
-                step = start_block(cur.block, x, y, t, trail, v.params, link_lost, outbound_speed, linkmap, resume,
-                                   free=free, yaw=yaw, regaining=book.link.regaining(t),
-                                   approach=self.heard_again)
+                step = self._begin(cur, x, y, yaw, t, trail, outbound_speed, free)
             else:
                 step = step_block(self.service, x, y, yaw, t, trail, v.params, link_lost, outbound_speed,
                                   slipping=estimator.slipping, linkmap=linkmap, regaining=book.link.regaining(t),
                                   free=free, approach=self.heard_again)
         except Exception as e:  # noqa: BLE001 - the return runs when nobody can restart the vehicle
             return self._fault(cur.index, e, t)
+        step = self._took(step, cur, fresh, book.current_id, t)
+        if step.finished is not None:
+            self._finish(step, cur, link_lost, t)
+            return 0.0, 0.0
+        return keep_off(seen, t, x, y, yaw, step.speed, step.yaw_rate, v.params["RTL_BODY_R"], FOLLOWER.max_yaw_rate)
+
+    def _begin(self, cur: ExecutionLease, x: float, y: float, yaw: float, t: float, trail: Trail,
+               outbound_speed: float, free: FreeSpace) -> ServiceStep:
+        """The first step of a new block: a block of the same chain resumes the way the last one was on."""
+        v = self.vehicle
+        book = v.book
+        resume = None
+        if self.way is not None and self.way_chain == cur.chain:
+            resume = self.way.resumed((x, y), self.way.length)
+        return start_block(cur.block, x, y, t, trail, v.params, book.link.lost, outbound_speed, v.linkmap, resume,
+                           free=free, yaw=yaw, regaining=book.link.regaining(t), approach=self.heard_again)
+
+    def _took(self, step: ServiceStep, cur: ExecutionLease, fresh: bool, current_id, t: float) -> ServiceStep:
+        """The block's step taken on: its state and way kept, a new route under a new sublease (the item it
+        leaves reached), and a seek past the map's place ended where a station is heard."""
+        v = self.vehicle
         if fresh:
             self.index = cur.index
         route = step.state.route
         if route is not None and route.way is not None:
             self.way, self.way_chain = route.way, cur.chain
-        if step.replanned and book.current_id is not None:
+        if step.replanned and current_id is not None:
             if not fresh and self.service is not None:
                 self.reached.append(self.service.items[self.service.item].seq)
-            v.book, _ = v.book.issue_sublease(book.current_id)
+            v.book, _ = v.book.issue_sublease(current_id)
         self.service = step.state
         if step.finished is None and step.state.seeking and self._station_heard(t):
             # seeking past the map's place for the owner's link, and a station is heard here: the link to the
             # ground is back (a second station of the owner's, as in the handover world), and seeking on would
             # only drive away from it
             step = replace(step, finished=ExpireReason.COMPLETED)
-        if step.finished is not None:
-            st = step.state
-            if step.finished is ExpireReason.COMPLETED and 0 <= st.item < len(st.items):
-                self.reached.append(st.items[st.item].seq)
-            if self.deferred(cur, link_lost):
-                v.apply(v.book.regained_here(t))  # the link is back and the block has done what it can
-            else:
-                v.apply(v.book.finish(cur.index, step.finished, t))
-            return 0.0, 0.0
-        return keep_off(seen, t, x, y, yaw, step.speed, step.yaw_rate, v.params["RTL_BODY_R"], FOLLOWER.max_yaw_rate)
+        return step
+
+    def _finish(self, step: ServiceStep, cur: ExecutionLease, link_lost: bool, t: float) -> None:
+        """The block ended: its last item reached if it completed, and the lease ended, by a regain here when the
+        link is back and the block has done what it can."""
+        v = self.vehicle
+        st = step.state
+        if step.finished is ExpireReason.COMPLETED and 0 <= st.item < len(st.items):
+            self.reached.append(st.items[st.item].seq)
+        if self.deferred(cur, link_lost):
+            v.apply(v.book.regained_here(t))
+        else:
+            v.apply(v.book.finish(cur.index, step.finished, t))
 
     def _station_heard(self, t: float) -> bool:
         heard = self.vehicle.station_heard_at

@@ -288,52 +288,20 @@ def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_dis
         s = np.asarray(start, dtype=float)
         end = s + max_displacement * np.array([math.cos(heading), math.sin(heading)])
         return Route(np.array([s, end]), (float(end[0]), float(end[1])), -1, True)
-    if resume is not None:
-        way = resume
-        goal = -1
-    else:
-        good = trail.link_good()
-        goal = target_index(good, target, link_lost)
-        if goal < 0:
-            s = np.asarray(start, dtype=float)
-            return Route(np.array([s]), None, -1, False)
-        # to the crumb target (shortcuts never jump past it), then on from it to the trail's start
-        pts, idx = _retrace(trail, start, goal)
-        at_goal = polyline_length(pts)
-        if goal > 0:
-            more, more_idx = _retrace(trail, (float(pts[-1, 0]), float(pts[-1, 1])), 0, first=goal)
-            pts, idx = np.vstack([pts, more[1:]]), np.concatenate([idx, more_idx[1:]])
-        way = Way(pts, _neighbourhood_max(pts, outbound_speeds(trail, idx)), at_goal,
-                  _heard_along(pts, idx, heard_stretch(good, goal)))
+    way, goal = (resume, -1) if resume is not None else _retraced_way(trail, start, target, link_lost)
+    if way is None:
+        s = np.asarray(start, dtype=float)
+        return Route(np.array([s]), None, -1, False)
     lost_link = target is Target.LINK and link_lost
     total = way.length
-    onward_to = total  # how far along the way a block that arrives with the link still down may go on
-    if not lost_link:
-        at, by_map, extra = total, False, 0.0
-    else:
-        at, by_map, extra = way.goal, False, overshoot
-        if linkmap is not None:
-            hit = linkmap.first_reliable(way.points, skip=way.goal)
-            if hit is not None:
-                at, by_map = _along(way.points, *hit), True
-                # into the place, but no further than halfway to where the way next meets a place the link was
-                # seen to fail (a null, a loop back through a dead stretch): that is a fringe like the one it
-                # entered by (an unvisited cell beside the trail is not: a trail runs along cell edges)
-                gap = linkmap.first_reliable(way.points, skip=at, poor=True)
-                extra = map_depth if gap is None else min(map_depth, 0.5 * (_along(way.points, *gap) - at))
-                onward_to = _next_stretch(linkmap, way.points, at, gap, map_depth, map_seek)
+    at, by_map, extra, onward_to = _stop_along(way, lost_link, linkmap, overshoot, map_depth, map_seek)
     at = min(at, total)
     head, _, k = _cut(way.points, at)
     gx, gy = float(head[-1, 0]), float(head[-1, 1])
     full, tail, k2 = _cut(way.points, min(total, at + extra))
     # a point's speed is that of the stretch leaving it: the cut point drives on at its segment's
     speeds = np.concatenate([way.speeds[: k2 + 1], [way.speeds[k2]]])
-    onward = None
-    if lost_link and onward_to > at + extra:
-        o_pts = _cut(_cut(way.points, onward_to)[0], at)[1]
-        o_speeds = np.concatenate([[way.speeds[k]], way.speeds[k + 1:]])[: len(o_pts)]
-        o_pts, o_speeds = keep_clear(o_pts, o_speeds, free, clearance)
-        onward = Route(o_pts, (float(o_pts[-1, 0]), float(o_pts[-1, 1])), 0, False, o_speeds)
+    onward = _onward(way, at, k, onward_to, free, clearance) if lost_link and onward_to > at + extra else None
     keep = np.ones(len(full), dtype=bool)
     keep[1:] = np.hypot(*np.diff(full, axis=0).T) > 1e-9
     full, speeds = full[keep], speeds[: len(keep)][keep]
@@ -346,6 +314,53 @@ def plan_route(trail: Trail, start: tuple[float, float], target: Target, max_dis
         full, speeds = np.vstack([full[:heard_at], kept]), np.concatenate([speeds[:heard_at], kept_speeds])
     pts, cut = truncate(full, start, max_displacement)
     return Route(pts, (gx, gy), goal if goal >= 0 else -1, cut, speeds[: len(pts)], onward, way, by_map)
+
+
+def _retraced_way(trail: Trail, start: tuple[float, float], target: Target,
+                  link_lost: bool) -> tuple[Way | None, int]:
+    """(the way back along the trail from ``start``, the crumb target's index): to the crumb target (shortcuts
+    never jump past it), then on from it to the trail's start; (None, goal) when there is no crumb target."""
+    good = trail.link_good()
+    goal = target_index(good, target, link_lost)
+    if goal < 0:
+        return None, goal
+    pts, idx = _retrace(trail, start, goal)
+    at_goal = polyline_length(pts)
+    if goal > 0:
+        more, more_idx = _retrace(trail, (float(pts[-1, 0]), float(pts[-1, 1])), 0, first=goal)
+        pts, idx = np.vstack([pts, more[1:]]), np.concatenate([idx, more_idx[1:]])
+    return Way(pts, _neighbourhood_max(pts, outbound_speeds(trail, idx)), at_goal,
+               _heard_along(pts, idx, heard_stretch(good, goal))), goal
+
+
+def _stop_along(way: Way, lost_link: bool, linkmap: LinkMap | None, overshoot: float, map_depth: float,
+                map_seek: float) -> tuple[float, bool, float, float]:
+    """Where along ``way`` the return stops: (metres along, whether the link map chose it, how much further it
+    drives past it, how far along a block that arrives with the link still down may go on)."""
+    total = way.length
+    if not lost_link:
+        return total, False, 0.0, total
+    if linkmap is None:
+        return way.goal, False, overshoot, total
+    hit = linkmap.first_reliable(way.points, skip=way.goal)
+    if hit is None:
+        return way.goal, False, overshoot, total
+    at = _along(way.points, *hit)
+    # into the place, but no further than halfway to where the way next meets a place the link was seen to fail (a
+    # null, a loop back through a dead stretch): that is a fringe like the one it entered by (an unvisited cell
+    # beside the trail is not: a trail runs along cell edges)
+    gap = linkmap.first_reliable(way.points, skip=at, poor=True)
+    extra = map_depth if gap is None else min(map_depth, 0.5 * (_along(way.points, *gap) - at))
+    return at, True, extra, _next_stretch(linkmap, way.points, at, gap, map_depth, map_seek)
+
+
+def _onward(way: Way, at: float, k: int, onward_to: float, free: FreeSpace | None, clearance: float) -> Route:
+    """The way on beyond the stop (the ``k``-th segment holds it) to ``onward_to``, kept clear of what the range
+    sensor saw occupied: what a block follows when its target turns out to be a dead zone."""
+    o_pts = _cut(_cut(way.points, onward_to)[0], at)[1]
+    o_speeds = np.concatenate([[way.speeds[k]], way.speeds[k + 1:]])[: len(o_pts)]
+    o_pts, o_speeds = keep_clear(o_pts, o_speeds, free, clearance)
+    return Route(o_pts, (float(o_pts[-1, 0]), float(o_pts[-1, 1])), 0, False, o_speeds)
 
 
 def _cut_corners(pts: np.ndarray, speeds: np.ndarray, heard: float, free: FreeSpace | None,

@@ -151,23 +151,8 @@ def _next_item(st: ServiceState, x: float, y: float, t: float, trail: Trail, par
     route: Route | None = None
     max_disp = params["RTL_MAX_DISP"]
     if it.command == NAV_RETURN_TO_LINK:
-        max_disp = it.param1 if it.param1 > 0 else max_disp
-        speed = it.param2 if it.param2 > 0 else speed
-        target = Target(int(it.param3)) if it.param3 >= 0 else Target(int(params["RTL_TARGET"]))
-        # the displacement budget is measured from where the block started
-        remaining = max(0.0, max_disp - math.hypot(x - st.start[0], y - st.start[1]))
-        # past the target crumb by the arrival radius (arrival then means reaching it) and by the distance the
-        # tag lags behind the link: the quality behind it averages over LINK_TAG_LAG_S of outbound driving
-        overshoot = params["RTL_ARRIVE_R"] + (outbound_speed or speed) * LINK_TAG_LAG_S
-        # a place the map vouches for: past its edge by the arrival radius and half a cell, so the robot stops
-        # inside the place that holds, not on its fringe
-        depth = params["RTL_ARRIVE_R"] + 0.5 * params["LNK_MAP_CELL"]
-        route = plan_route(trail, (x, y), target, remaining, link_lost, heading=math.radians(it.x),
-                           overshoot=overshoot, linkmap=linkmap, resume=resume if link_lost else None,
-                           map_depth=depth, map_seek=params["LNK_MAP_SEEK"], free=free,
-                           clearance=params["RTL_CUT_CLR"])
-        if target is not Target.HEADING:
-            route = _bounded_from(route, st.start, max_disp)
+        route, speed, max_disp = _return_to_link(it, st, x, y, trail, params, link_lost, outbound_speed, speed,
+                                                 max_disp, linkmap, resume, free)
     elif it.command == NAV_RETURN_TO_LAUNCH:
         route = plan_route(trail, (x, y), Target.ORIGIN, math.inf, link_lost, free=free,
                            clearance=params["RTL_CUT_CLR"])
@@ -176,15 +161,45 @@ def _next_item(st: ServiceState, x: float, y: float, t: float, trail: Trail, par
         route = Route(np.array([[x, y], [it.x, it.y]]), (it.x, it.y), -1, False)
         max_disp = math.inf
     path = Path(route.points) if route is not None and len(route.points) >= 2 else None
-    own_speed = it.command == NAV_RETURN_TO_LINK and it.param2 > 0
-    stretch = (params["RTL_SPEED"] == 0 and not own_speed and route is not None and route.speeds is not None
-               and it.command in (NAV_RETURN_TO_LINK, NAV_RETURN_TO_LAUNCH))
     st = replace(st, item=k, item_started_at=t, route=route, path=path, progress=0.0, speed=speed,
-                 max_displacement=max_disp, best_remaining=math.inf, last_progress_at=t, stretch_speed=stretch,
-                 onward=False, seeking=False)
+                 max_displacement=max_disp, best_remaining=math.inf, last_progress_at=t,
+                 stretch_speed=_stretches(it, route, params), onward=False, seeking=False)
     if yaw is None or path is None:
         return ServiceStep(st, 0.0, 0.0, replanned=True)
     return _first_move(st, x, y, yaw, t, params, link_lost, regaining, approach)
+
+
+def _return_to_link(it: PlanItem, st: ServiceState, x: float, y: float, trail: Trail, params: Params,
+                    link_lost: bool, outbound_speed: float, speed: float, max_disp: float, linkmap: LinkMap | None,
+                    resume: Way | None, free: FreeSpace | None) -> tuple[Route, float, float]:
+    """A RETURN_TO_LINK item's (route, speed, displacement limit): its own limit, speed and target where it gives
+    them (param1..3), else the parameters'."""
+    max_disp = it.param1 if it.param1 > 0 else max_disp
+    speed = it.param2 if it.param2 > 0 else speed
+    target = Target(int(it.param3)) if it.param3 >= 0 else Target(int(params["RTL_TARGET"]))
+    # the displacement budget is measured from where the block started
+    remaining = max(0.0, max_disp - math.hypot(x - st.start[0], y - st.start[1]))
+    # past the target crumb by the arrival radius (arrival then means reaching it) and by the distance the
+    # tag lags behind the link: the quality behind it averages over LINK_TAG_LAG_S of outbound driving
+    overshoot = params["RTL_ARRIVE_R"] + (outbound_speed or speed) * LINK_TAG_LAG_S
+    # a place the map vouches for: past its edge by the arrival radius and half a cell, so the robot stops
+    # inside the place that holds, not on its fringe
+    depth = params["RTL_ARRIVE_R"] + 0.5 * params["LNK_MAP_CELL"]
+    route = plan_route(trail, (x, y), target, remaining, link_lost, heading=math.radians(it.x),
+                       overshoot=overshoot, linkmap=linkmap, resume=resume if link_lost else None,
+                       map_depth=depth, map_seek=params["LNK_MAP_SEEK"], free=free,
+                       clearance=params["RTL_CUT_CLR"])
+    if target is not Target.HEADING:
+        route = _bounded_from(route, st.start, max_disp)
+    return route, speed, max_disp
+
+
+def _stretches(it: PlanItem, route: Route | None, params: Params) -> bool:
+    """Whether the route's own speeds set the pace: a return with no speed of its own (neither RTL_SPEED nor the
+    item's param2) on a route that carries speeds."""
+    own_speed = it.command == NAV_RETURN_TO_LINK and it.param2 > 0
+    return (params["RTL_SPEED"] == 0 and not own_speed and route is not None and route.speeds is not None
+            and it.command in (NAV_RETURN_TO_LINK, NAV_RETURN_TO_LAUNCH))
 
 
 def _first_move(st: ServiceState, x: float, y: float, yaw: float, t: float, params: Params, link_lost: bool,

@@ -213,43 +213,20 @@ def _radio(r: _Lines, raw: dict) -> dict[str, list[float]]:
 
 
 def parse_spec(text: str, file: str = "<spec>", spec_dir: Path | None = None) -> Spec:
-    """The trials of a spec, or SpecError naming the first mistake."""
+    """The trials of a spec, or SpecError naming the first mistake (the fields are checked in the order a reader
+    meets them: the TOML, its fields, scenarios, vehicles, seeds, the grid, policies, their pairing, the timeout,
+    the grid's size, then each generated world)."""
     r = _Lines(file, text)
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        m = re.search(r"line (\d+)", str(e))
-        line = int(m.group(1)) if m else (max(1, len(r.lines)) if "end of document" in str(e) else None)
-        raise SpecError(file, line, "", f"not valid TOML: {e}") from None
-    for k in raw:
-        if k not in FIELDS:
-            raise r.fail(k, f"unknown field (expected one of {', '.join(FIELDS)})")
+    raw = _toml(r, text)
     spec_dir = spec_dir if spec_dir is not None else Path(file).resolve().parent
     names = _strings(r, raw, "scenarios", None)
     scenarios = [_scenario_text(r, spec_dir, n, f"scenarios[{k}]") for k, n in enumerate(names)]
-    vehicles = _strings(r, raw, "vehicles", []) if "vehicles" in raw else None
-    for k, veh in enumerate(vehicles or []):
-        if veh not in VEHICLES:
-            raise r.fail(f"vehicles[{k}]", f"must be one of {', '.join(VEHICLES)}, got {veh!r}")
+    vehicles = _vehicles(r, raw)
     seeds = _seeds(r, raw) if "seeds" in raw else None
     grid = {**_params(r, raw), **_radio(r, raw)}
-    policies = _strings(r, raw, "policies", [DEFAULT_POLICY])
-    for k, p in enumerate(policies):
-        if p not in POLICY_NAMES:
-            raise r.fail(f"policies[{k}]", f"unknown policy {p!r} (known: {', '.join(POLICY_NAMES)})")
-    # the grid pairs each policy with the vehicles that can fly it (the ArduPilot firmware's failsafes with that
-    # firmware, PX4's with PX4, the native policies with the native robots), so one spec compares them all; a policy
-    # no listed vehicle flies is an error, as is a vehicle no listed policy suits
-    listed = vehicles or [parse(text_, source)[0].vehicle for _, source, text_ in scenarios]
-    for k, p in enumerate(policies):
-        if not any(flies(p, veh) for veh in listed):
-            need = f"vehicle {vehicle_for(p)!r}" if vehicle_for(p) else "a native vehicle (rover, legged)"
-            if p == "companion":
-                need = "vehicle 'ardurover' or 'px4rover'"
-            raise r.fail(f"policies[{k}]", f"policy {p!r} needs {need} in vehicles")
-    for k, veh in enumerate(vehicles or []):
-        if not any(flies(p, veh) for p in policies):
-            raise r.fail(f"vehicles[{k}]", f"no listed policy can be flown by vehicle {veh!r}")
+    policies = _policies(r, raw)
+    _check_pairing(r, policies, vehicles or [parse(text_, source)[0].vehicle for _, source, text_ in scenarios],
+                   vehicles or [])
     timeout = raw.get("timeout_s", DEFAULT_TIMEOUT_S)
     if not _number(timeout) or timeout <= 0:
         raise r.fail("timeout_s", f"must be a positive number of wall-clock seconds, got {timeout!r}")
@@ -258,23 +235,79 @@ def parse_spec(text: str, file: str = "<spec>", spec_dir: Path | None = None) ->
     if n > MAX_TRIALS:
         raise r.fail("scenarios", f"the grid has {n} trials, more than {MAX_TRIALS}")
     trials: dict[str, Trial] = {}
-    for k, (name, source, text_) in enumerate(scenarios):
-        own, generated = parse(text_, source)
-        flown = {}  # seed -> the scenario text it flies: a generated world is drawn once per seed
-        for veh in vehicles or [own.vehicle]:
-            for seed in seeds or [own.seed]:
-                if seed not in flown:
-                    try:
-                        flown[seed] = text_ if generated is None else world_text(text_, source, seed)
-                    except ScenarioError as e:
-                        raise r.fail(f"scenarios[{k}]", f"scenario {name!r}, seed {seed}: {e}") from None
-                for combo in combos:
-                    for policy in policies:
-                        if not flies(policy, veh):
-                            continue
-                        t = Trial(name, source, flown[seed], veh, seed, tuple(sorted(combo)), policy)
-                        trials.setdefault(t.id, t)
+    for k, scenario in enumerate(scenarios):
+        for t in _scenario_trials(r, k, scenario, vehicles, seeds, combos, policies):
+            trials.setdefault(t.id, t)
     return Spec(file, tuple(trials.values()), float(timeout))
+
+
+def _toml(r: _Lines, text: str) -> dict:
+    """The spec's TOML table, its fields all known; a TOML error names its line."""
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        m = re.search(r"line (\d+)", str(e))
+        line = int(m.group(1)) if m else (max(1, len(r.lines)) if "end of document" in str(e) else None)
+        raise SpecError(r.file, line, "", f"not valid TOML: {e}") from None
+    for k in raw:
+        if k not in FIELDS:
+            raise r.fail(k, f"unknown field (expected one of {', '.join(FIELDS)})")
+    return raw
+
+
+def _vehicles(r: _Lines, raw: dict) -> list[str] | None:
+    """The listed vehicles, or None for each scenario's own robot."""
+    if "vehicles" not in raw:
+        return None
+    vehicles = _strings(r, raw, "vehicles", [])
+    for k, veh in enumerate(vehicles):
+        if veh not in VEHICLES:
+            raise r.fail(f"vehicles[{k}]", f"must be one of {', '.join(VEHICLES)}, got {veh!r}")
+    return vehicles
+
+
+def _policies(r: _Lines, raw: dict) -> list[str]:
+    policies = _strings(r, raw, "policies", [DEFAULT_POLICY])
+    for k, p in enumerate(policies):
+        if p not in POLICY_NAMES:
+            raise r.fail(f"policies[{k}]", f"unknown policy {p!r} (known: {', '.join(POLICY_NAMES)})")
+    return policies
+
+
+def _check_pairing(r: _Lines, policies: list[str], listed: list[str], vehicles: list[str]) -> None:
+    """The grid pairs each policy with the vehicles that can fly it (the ArduPilot firmware's failsafes with that
+    firmware, PX4's with PX4, the native policies with the native robots), so one spec compares them all; a policy
+    no ``listed`` vehicle (the spec's, else the scenarios' own) flies is an error, as is a vehicle of the spec's
+    ``vehicles`` no listed policy suits."""
+    for k, p in enumerate(policies):
+        if not any(flies(p, veh) for veh in listed):
+            need = f"vehicle {vehicle_for(p)!r}" if vehicle_for(p) else "a native vehicle (rover, legged)"
+            if p == "companion":
+                need = "vehicle 'ardurover' or 'px4rover'"
+            raise r.fail(f"policies[{k}]", f"policy {p!r} needs {need} in vehicles")
+    for k, veh in enumerate(vehicles):
+        if not any(flies(p, veh) for p in policies):
+            raise r.fail(f"vehicles[{k}]", f"no listed policy can be flown by vehicle {veh!r}")
+
+
+def _scenario_trials(r: _Lines, k: int, scenario: tuple[str, str, str], vehicles: list[str] | None,
+                     seeds: list[int] | None, combos: list[tuple], policies: list[str]):
+    """The trials of the ``k``-th scenario, in grid order: each vehicle, seed, parameter combination and policy the
+    vehicle flies. A generated world is drawn once per seed, and the trial carries it written out."""
+    name, source, text_ = scenario
+    own, generated = parse(text_, source)
+    flown = {}  # seed -> the scenario text it flies
+    for veh in vehicles or [own.vehicle]:
+        for seed in seeds or [own.seed]:
+            if seed not in flown:
+                try:
+                    flown[seed] = text_ if generated is None else world_text(text_, source, seed)
+                except ScenarioError as e:
+                    raise r.fail(f"scenarios[{k}]", f"scenario {name!r}, seed {seed}: {e}") from None
+            for combo in combos:
+                for policy in policies:
+                    if flies(policy, veh):
+                        yield Trial(name, source, flown[seed], veh, seed, tuple(sorted(combo)), policy)
 
 
 def load_spec(path: str | Path) -> Spec:

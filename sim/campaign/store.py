@@ -175,33 +175,53 @@ def summary(rows: Iterable[dict]) -> list[dict]:
     a line of its own, not averaged away; ``params`` is "" when the spec swept none). Rates are over the trials
     that ran (errors are counted apart, they say nothing about the policy); time to link counts a never-regained
     link as infinite; link cycles are COMMS_LOST events per run."""
+    return [_summary_line(key, rs) for key, rs in sorted(_groups(rows).items())]
+
+
+def _groups(rows: Iterable[dict]) -> dict[tuple[str, str, str, str], list[dict]]:
+    """The rows by scenario, vehicle, policy and parameter values ("" for none swept)."""
     groups: dict[tuple[str, str, str, str], list[dict]] = {}
     for r in rows:
         params = r.get("params") or ""
         groups.setdefault((r["scenario"], r["vehicle"], r["policy"], "" if params == "{}" else params), []).append(r)
-    out = []
-    for (scenario, vehicle, policy, params), rs in sorted(groups.items()):
-        ran = [r for r in rs if r.get("status") in FINISHED]
-        ttl = [x for r in ran if (x := time_to_link(r)) is not None]
-        rest = [x for r in ran if (x := rest_from_loss(r)) is not None]
-        coll = [r["collisions_during_return"] for r in ran if r.get("collisions_during_return") is not None]
-        cycles = [r["link_cycles"] for r in ran if r.get("link_cycles") is not None]
-        relapsed = [r["relapses"] for r in ran if r.get("relapses") is not None]
-        out.append({
-            "scenario": scenario, "vehicle": vehicle, "policy": policy, "params": params, "n": len(rs),
-            "ok": sum(r["status"] == "ok" for r in rs), "failed": sum(r["status"] == "failed" for r in rs),
-            "errors": sum(r["status"] == "error" for r in rs),
-            "pass_rate": sum(r["status"] == "ok" for r in ran) / len(ran) if ran else None,
-            "link_regained_rate": sum(r.get("link_regained_s") is not None for r in ran) / len(ran) if ran else None,
-            "time_to_link_p50_s": percentile(ttl, 50), "time_to_link_p90_s": percentile(ttl, 90),
-            "time_to_link_p99_s": percentile(ttl, 99),
-            "distance_back_m_mean": _mean([r["distance_back_m"] for r in ran if r.get("distance_back_m") is not None]),
-            "rest_from_loss_m_mean": _mean(rest), "rest_from_loss_m_p90": percentile(rest, 90),
-            "collisions_during_return": sum(coll) if coll else None,
-            "link_cycles_mean": _mean(cycles), "link_cycles_max": max(cycles) if cycles else None,
-            "relapses_mean": _mean(relapsed), "relapses_max": max(relapsed) if relapsed else None,
-        })
-    return out
+    return groups
+
+
+def _present(rows: list[dict], key: str) -> list:
+    """The values of ``key`` in the rows that have one."""
+    return [r[key] for r in rows if r.get(key) is not None]
+
+
+def _rate(ran: list[dict], hits: int) -> float | None:
+    return hits / len(ran) if ran else None
+
+
+def _max(values: list) -> float | None:
+    return max(values) if values else None
+
+
+def _summary_line(key: tuple[str, str, str, str], rs: list[dict]) -> dict:
+    """The summary of one group's trials (see ``summary``)."""
+    scenario, vehicle, policy, params = key
+    ran = [r for r in rs if r.get("status") in FINISHED]
+    ttl = [x for r in ran if (x := time_to_link(r)) is not None]
+    rest = [x for r in ran if (x := rest_from_loss(r)) is not None]
+    coll = _present(ran, "collisions_during_return")
+    cycles, relapsed = _present(ran, "link_cycles"), _present(ran, "relapses")
+    return {
+        "scenario": scenario, "vehicle": vehicle, "policy": policy, "params": params, "n": len(rs),
+        "ok": sum(r["status"] == "ok" for r in rs), "failed": sum(r["status"] == "failed" for r in rs),
+        "errors": sum(r["status"] == "error" for r in rs),
+        "pass_rate": _rate(ran, sum(r["status"] == "ok" for r in ran)),
+        "link_regained_rate": _rate(ran, sum(r.get("link_regained_s") is not None for r in ran)),
+        "time_to_link_p50_s": percentile(ttl, 50), "time_to_link_p90_s": percentile(ttl, 90),
+        "time_to_link_p99_s": percentile(ttl, 99),
+        "distance_back_m_mean": _mean(_present(ran, "distance_back_m")),
+        "rest_from_loss_m_mean": _mean(rest), "rest_from_loss_m_p90": percentile(rest, 90),
+        "collisions_during_return": sum(coll) if coll else None,
+        "link_cycles_mean": _mean(cycles), "link_cycles_max": _max(cycles),
+        "relapses_mean": _mean(relapsed), "relapses_max": _max(relapsed),
+    }
 
 
 def _fmt(v) -> str:

@@ -85,30 +85,71 @@ def figures(run) -> dict:
     plant = run.plant
     names, _returns, _driving, home_modes = meaning(plant)
     sc, rows, heard = run.scenario, plant.rows, plant.heard
-    timeout = plant.lnk_timeout
-    good_s = float(sc.params.get("LNK_GOOD_S", 1.5))
-    regain_s = float(sc.params.get("LNK_REGAIN_S", 1.0))
     eps = episodes(plant)
     first = eps[0] if eps else None
-    lost = None
-    if first is not None:
-        k = bisect.bisect_right(heard, first[0]) - 1
-        lost = heard[k] if k >= 0 else None
-    regained = since = None
-    if first is not None:
-        for a, b in contact_runs(heard, good_s):
-            if b >= first[0] and b - max(a, first[0]) >= regain_s - 1e-9:
-                since = max(a, first[0])
-                regained = since + regain_s
-                break
-    dt = rows[1][0] - rows[0][0] if len(rows) > 1 else 0.02
+    lost = _last_heard_before(heard, first)
+    since, regained = _contact_again(heard, first, float(sc.params.get("LNK_GOOD_S", 1.5)),
+                                     float(sc.params.get("LNK_REGAIN_S", 1.0)))
+    at = _RowAt(rows)
+    blocks, distance, max_disp, driving, collided = _episode_blocks(eps, at, names)
+    rest, quality, regained_by, final_err = _rest(first, since, at, home_modes)
+    return {
+        "link_lost_s": rounded(lost), "return_started_s": rounded(first[0] if first else None),
+        "reaction_latency_s": rounded(first[0] - lost - plant.lnk_timeout if first and lost is not None else None, 4),
+        "link_regained_s": rounded(regained), "distance_back_m": rounded(distance, 2),
+        "max_displacement_m": rounded(max_disp, 2),
+        "final_target_error_m": rounded(final_err, 2), "collisions": run.world.collisions,
+        "stale_commands_executed": None, "commands_rejected": plant.link.tap.rejected,
+        "estimator_rmse_m": rounded(_estimator_rmse(rows)), "trail_points": None, "trail_max_deviation_m": None,
+        "lease_events": [], "loss_position": point(run.true_at(lost) if lost is not None else None),
+        "rest_position": point(rest), "rest_link_quality": rounded(quality), "link_cycles": len(eps),
+        "regained_by": regained_by, "collisions_during_return": collided,
+        "return_speed_mps": rounded(distance / driving if driving > 0 else None), "blocks": blocks,
+        "frames": {**FRAMES, "final_target_error_m": "true (the firmware's home: where the rover armed)"},
+        "relapses": None,  # returnlink's own notion (a regain, then a loss with no operator driving): no leases here
+        "firmware": plant.link.tap.version, "firmware_modes": plant.firmware_modes,
+    }
 
-    def k_of(t: float) -> int:
-        return min(len(rows) - 1, max(0, int(round(t / dt)) - 1))
 
+def _last_heard_before(heard: list[float], first) -> float | None:
+    """When the firmware last heard its station before the first episode began (None: no episode, or never)."""
+    if first is None:
+        return None
+    k = bisect.bisect_right(heard, first[0]) - 1
+    return heard[k] if k >= 0 else None
+
+
+def _contact_again(heard: list[float], first, good_s: float, regain_s: float) -> tuple[float | None, float | None]:
+    """(since, regained): the start of the first run of contact after the first episode began that lasts
+    LNK_REGAIN_S, and LNK_REGAIN_S into it (the native vehicle's definition of a regain); None, None: none."""
+    if first is None:
+        return None, None
+    for a, b in contact_runs(heard, good_s):
+        if b >= first[0] and b - max(a, first[0]) >= regain_s - 1e-9:
+            since = max(a, first[0])
+            return since, since + regain_s
+    return None, None
+
+
+class _RowAt:
+    """The firmware's rows indexed by simulated time: one row a tick (50 Hz unless the rows say otherwise)."""
+
+    def __init__(self, rows: list) -> None:
+        self.rows = rows
+        self.dt = rows[1][0] - rows[0][0] if len(rows) > 1 else 0.02
+        self.last = len(rows) - 1
+
+    def k(self, t: float) -> int:
+        return min(len(self.rows) - 1, max(0, int(round(t / self.dt)) - 1))
+
+
+def _episode_blocks(eps, at: _RowAt, names: dict[int, str]):
+    """The report's blocks, one per episode (what the firmware drove in it), and over all of them: (blocks,
+    distance driven, the largest displacement, time moving, collisions)."""
+    rows, dt = at.rows, at.dt
     blocks, distance, max_disp, driving, collided = [], 0.0, 0.0, 0.0, 0
     for i, (a, b, mode) in enumerate(eps):
-        ka, kb = k_of(a), k_of(b) if b is not None else len(rows) - 1
+        ka, kb = at.k(a), at.k(b) if b is not None else at.last
         start = rows[ka][1:3]
         d = disp = moving = 0.0
         for k in range(ka + 1, kb + 1):
@@ -121,37 +162,35 @@ def figures(run) -> dict:
         blocks.append({"index": i, "command": names.get(mode, str(mode)), "start_s": rounded(a),
                        "end_s": rounded(b), "reason": "OPERATOR" if b is not None else None,
                        "distance_m": rounded(d, 2), "displacement_m": rounded(disp, 2), "limit_m": None})
-    rest = quality = regained_by = final_err = None
-    if first is not None:
-        k_rest = k_of(first[1]) - 1 if first[1] is not None else len(rows) - 1
-        rest, quality = rows[k_rest][1:3], rows[k_rest][6]
-        if since is not None:
-            if first[1] is None or since <= first[1] + 1e-9 or quality >= GOOD_LINK_QUALITY:
-                regained_by = "return"
-            else:
-                moved = max((math.dist(rows[k][1:3], rest) for k in range(k_rest, k_of(since) + 1)), default=0.0)
-                regained_by = "operator" if moved > REGAIN_MOVED_M else "return"
-        armed = next((r for r in rows if r[10]), None)
-        if first[2] in home_modes and armed is not None:
-            final_err = math.dist(rest, armed[1:3])
+    return blocks, distance, max_disp, driving, collided
+
+
+def _rest(first, since: float | None, at: _RowAt, home_modes) -> tuple:
+    """Where the first episode left the robot and its link there, who regained the link (the return, or the
+    operator who drove more than REGAIN_MOVED_M from rest before it came back), and the distance from rest to home
+    for a return whose target is home: (rest, quality, regained_by, final error), all None without an episode."""
+    if first is None:
+        return None, None, None, None
+    rows = at.rows
+    k_rest = at.k(first[1]) - 1 if first[1] is not None else at.last
+    rest, quality = rows[k_rest][1:3], rows[k_rest][6]
+    regained_by = final_err = None
+    if since is not None:
+        if first[1] is None or since <= first[1] + 1e-9 or quality >= GOOD_LINK_QUALITY:
+            regained_by = "return"
+        else:
+            moved = max((math.dist(rows[k][1:3], rest) for k in range(k_rest, at.k(since) + 1)), default=0.0)
+            regained_by = "operator" if moved > REGAIN_MOVED_M else "return"
+    armed = next((r for r in rows if r[10]), None)
+    if first[2] in home_modes and armed is not None:
+        final_err = math.dist(rest, armed[1:3])
+    return rest, quality, regained_by, final_err
+
+
+def _estimator_rmse(rows: list) -> float | None:
+    """The firmware's EKF against the truth over the rows where it had an estimate."""
     est = [(r[1], r[2], r[3], r[4]) for r in rows if not math.isnan(r[3])]
-    rmse = math.sqrt(sum((a - c) ** 2 + (b - d) ** 2 for a, b, c, d in est) / len(est)) if est else None
-    return {
-        "link_lost_s": rounded(lost), "return_started_s": rounded(first[0] if first else None),
-        "reaction_latency_s": rounded(first[0] - lost - timeout if first and lost is not None else None, 4),
-        "link_regained_s": rounded(regained), "distance_back_m": rounded(distance, 2),
-        "max_displacement_m": rounded(max_disp, 2),
-        "final_target_error_m": rounded(final_err, 2), "collisions": run.world.collisions,
-        "stale_commands_executed": None, "commands_rejected": plant.link.tap.rejected,
-        "estimator_rmse_m": rounded(rmse), "trail_points": None, "trail_max_deviation_m": None, "lease_events": [],
-        "loss_position": point(run.true_at(lost) if lost is not None else None),
-        "rest_position": point(rest), "rest_link_quality": rounded(quality), "link_cycles": len(eps),
-        "regained_by": regained_by, "collisions_during_return": collided,
-        "return_speed_mps": rounded(distance / driving if driving > 0 else None), "blocks": blocks,
-        "frames": {**FRAMES, "final_target_error_m": "true (the firmware's home: where the rover armed)"},
-        "relapses": None,  # returnlink's own notion (a regain, then a loss with no operator driving): no leases here
-        "firmware": plant.link.tap.version, "firmware_modes": plant.firmware_modes,
-    }
+    return math.sqrt(sum((a - c) ** 2 + (b - d) ** 2 for a, b, c, d in est) / len(est)) if est else None
 
 
 def summary(run, m: dict) -> str:
@@ -215,10 +254,11 @@ def _tolerance(key: str) -> float:
 
 
 def _close(key: str, a, b) -> bool:
+    """Whether two values of metric ``key`` are the same within the firmware's repeatability: numbers within the
+    key's tolerance, tables and lists element by element, the mode timeline mode by mode, anything else exactly."""
     if key == "firmware_modes" and isinstance(a, list) and isinstance(b, list):
-        return ([x.get("mode") for x in a] == [x.get("mode") for x in b]
-                and all(abs(x["t"] - y["t"]) <= TOLERANCE["mode_s"] + 1e-9 for x, y in zip(a, b, strict=True)))
-    if isinstance(a, bool) or isinstance(b, bool) or isinstance(a, str) or a is None or b is None:
+        return _same_modes(a, b)
+    if _exact(a) or _exact(b):
         return a == b
     if isinstance(a, (int, float)) and isinstance(b, (int, float)):
         return abs(a - b) <= _tolerance(key) + 1e-9
@@ -227,6 +267,17 @@ def _close(key: str, a, b) -> bool:
     if isinstance(a, list) and isinstance(b, list):
         return len(a) == len(b) and all(_close(key, x, y) for x, y in zip(a, b, strict=True))
     return a == b
+
+
+def _exact(x) -> bool:
+    """A value compared exactly: a flag, a name or a missing figure."""
+    return isinstance(x, (bool, str)) or x is None
+
+
+def _same_modes(a: list, b: list) -> bool:
+    """The same modes in the same order, each switch within ``TOLERANCE["mode_s"]``."""
+    return ([x.get("mode") for x in a] == [x.get("mode") for x in b]
+            and all(abs(x["t"] - y["t"]) <= TOLERANCE["mode_s"] + 1e-9 for x, y in zip(a, b, strict=True)))
 
 
 def differing(a: dict, b: dict) -> list[str]:

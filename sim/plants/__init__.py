@@ -16,6 +16,7 @@ needs (the scenario, the seed, the frames the radio delivered) and answers in pl
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, Protocol
 
 from link.radio import LinkState
@@ -49,7 +50,6 @@ class Plant(Protocol):
     hears_last: bool
     rows: list[tuple] | None  # the plant's own per-tick rows (t, true x, true y, est x, est y, ...), or None
     stale: int  # actuations its own audit found outside the lease (the companion's router: frames it forwarded)
-    report: str  # the module that draws its run (``trajectory``, ``timeline``), imported only when plots are drawn
 
     @property
     def vehicle(self) -> Vehicle | None:
@@ -106,6 +106,10 @@ class Plant(Protocol):
 
     def summary(self, run: Any, m: dict) -> str:
         """The printed summary of a run and its metrics."""
+
+    def pictures(self, run: Any, out: Path) -> list[Path]:
+        """trajectory.png and timeline.png of a run in ``out``, as this plant's record draws them (its drawing module
+        imported only now: matplotlib is slow to import)."""
 
 
 __all__ = ["Plant"]

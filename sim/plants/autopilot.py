@@ -12,6 +12,7 @@ What differs is said by the subclass: its name, its lockstep's clock, its estima
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 
 from link.radio import LinkState, subsystem_rng
 from sim.firmware import metrics
@@ -30,7 +31,6 @@ class AutopilotPlant:
     autopilot = "the autopilot"  # its name in notes and pictures
     hears_last = True
     leases = False
-    report = "sim.firmware.report"
     vehicle = None  # no returnlink aboard
     stale = 0  # no lease to audit against
 
@@ -165,6 +165,14 @@ class AutopilotPlant:
 
     def summary(self, run, m: dict) -> str:
         return metrics.summary(run, m)
+
+    @staticmethod
+    def pictures(run, out: Path) -> list[Path]:
+        """trajectory.png and timeline.png of the modes (``sim.firmware.report``); matplotlib is imported only when
+        plots are drawn (about 0.4 CPU-s)."""
+        from sim.firmware import report
+
+        return [report.trajectory(run, out / "trajectory.png"), report.timeline(run, out / "timeline.png")]
 
 
 __all__ = ["DT", "AutopilotPlant"]

@@ -55,12 +55,33 @@ def to_toml(sc: Scenario) -> str:
     """The scenario file of ``sc``."""
     out = [f"name = {_value(sc.name)}", f"description = {_value(sc.description)}",
            f"duration = {_value(float(sc.duration))}", f"seed = {sc.seed}", f"vehicle = {_value(sc.vehicle)}", "",
-           "[world]", f"bounds = {_value([float(b) for b in sc.bounds])}"]
-    if sc.site is not None:  # a map world: its walls are the map's cells, named by file and content
-        site = sc.site
-        out[-2:-2] = ["[map]", f"file = {_value(site.file)}", f"unknown = {_value(site.unknown)}",
-                      f"wall_db = {_value(float(site.wall_db))}",
-                      f"wall_db_per_m = {_value(float(site.wall_db_per_m))}", f"digest = {_value(site.digest)}", ""]
+           *_map(sc), "[world]", f"bounds = {_value([float(b) for b in sc.bounds])}"]
+    out += _world(sc)
+    out += ["", "[radio]"] + [f"{f.name} = {_value(getattr(sc.radio, f.name))}" for f in fields(sc.radio)]
+    out += ["", "[start]", f"position = {_value([sc.start[0], sc.start[1]])}",
+            f"yaw_deg = {_value(_degrees(sc.start[2]))}"]
+    out += _operator(sc)
+    for e in sc.events:
+        out += ["", "[[events]]"] + [f"{f.name} = {_value(getattr(e, f.name))}" for f in fields(e)]
+    crit = [(f.name, getattr(sc.criteria, f.name)) for f in fields(sc.criteria)]
+    out += ["", "[criteria]"] + [f"{k} = {_value(list(v) if isinstance(v, tuple) else v)}" for k, v in crit
+                                 if v is not None]
+    return "\n".join(out) + "\n"
+
+
+def _map(sc: Scenario) -> list[str]:
+    """[map] of a map world, whose walls are the map's cells, named by file and content; nothing for others."""
+    if sc.site is None:
+        return []
+    site = sc.site
+    return ["[map]", f"file = {_value(site.file)}", f"unknown = {_value(site.unknown)}",
+            f"wall_db = {_value(float(site.wall_db))}",
+            f"wall_db_per_m = {_value(float(site.wall_db_per_m))}", f"digest = {_value(site.digest)}", ""]
+
+
+def _world(sc: Scenario) -> list[str]:
+    """The walls, radio-denied zones and ground stations of [world]."""
+    out: list[str] = []
     for w in sc.walls:
         out += ["", "[[world.walls]]", f"points = {_value([list(p) for p in w.points])}",
                 f"thickness = {_value(float(w.thickness))}", f"attenuation_db = {_value(float(w.attenuation_db))}"]
@@ -69,20 +90,17 @@ def to_toml(sc: Scenario) -> str:
     for s in sc.stations:
         out += ["", "[[world.stations]]", f"name = {_value(s.name)}", f"position = {_value([s.x, s.y])}",
                 f"sysid = {s.sysid}", f"power_dbm = {_value(float(s.power_dbm))}"]
-    out += ["", "[radio]"] + [f"{f.name} = {_value(getattr(sc.radio, f.name))}" for f in fields(sc.radio)]
-    out += ["", "[start]", f"position = {_value([sc.start[0], sc.start[1]])}",
-            f"yaw_deg = {_value(_degrees(sc.start[2]))}"]
-    out += ["", "[operator]", f"station = {_value(sc.operator_station)}", f"teleop = {_value(sc.teleop)}",
-            f"route = {_value([list(p) for p in sc.route])}"]
+    return out
+
+
+def _operator(sc: Scenario) -> list[str]:
+    """[operator]: the station it drives from, its route, its return plan and the vehicle parameters it sets."""
+    out = ["", "[operator]", f"station = {_value(sc.operator_station)}", f"teleop = {_value(sc.teleop)}",
+           f"route = {_value([list(p) for p in sc.route])}"]
     if sc.resume_route:
         out.append(f"resume_route = {_value([list(p) for p in sc.resume_route])}")
     out += [f"attempts = {sc.attempts}", f"rejoin = {_value(sc.rejoin)}",
             "plan = [" + "".join(f"\n  {_plan_item(i)}," for i in sc.plan) + ("\n]" if sc.plan else "]")]
     if sc.params:
         out.append("params = { " + ", ".join(f"{k} = {_value(float(v))}" for k, v in sc.params.items()) + " }")
-    for e in sc.events:
-        out += ["", "[[events]]"] + [f"{f.name} = {_value(getattr(e, f.name))}" for f in fields(e)]
-    crit = [(f.name, getattr(sc.criteria, f.name)) for f in fields(sc.criteria)]
-    out += ["", "[criteria]"] + [f"{k} = {_value(list(v) if isinstance(v, tuple) else v)}" for k, v in crit
-                                 if v is not None]
-    return "\n".join(out) + "\n"
+    return out
