@@ -52,6 +52,22 @@ def read_frames(parser, data) -> list:
     return out
 
 
+def drop_partial(parser) -> int:
+    """Drop the unfinished frame a datagram left at its end, and say how many bytes it held (0: none).
+
+    Why: pymavlink's parser is a stream parser. A datagram is whole, so bytes left at its end (a start-of-frame
+    byte and a header whose length runs past the datagram, garbage or a truncated frame) are no frame; kept, they
+    would take the first bytes of the next datagram as the rest of theirs, fail the CRC and swallow that datagram's
+    valid frame: one stray datagram would cost the owner's next command. (Serial links are cut into whole frames
+    before they reach a parser: ``vehicle.companion.links``.)"""
+    left = parser.buf_len()
+    if left:
+        parser.buf = bytearray()
+        parser.buf_index = 0
+        parser.expected_length = HEADER_V2 + CHECKSUM
+    return left
+
+
 def _decode_one(parser, data):
     """``parse_char(data)`` for a datagram that is one frame and an empty parser, without the state machine: the
     same decode, the same message or BAD_DATA, the same counters."""

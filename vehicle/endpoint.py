@@ -19,7 +19,7 @@ from pathlib import Path
 from types import MethodType
 from typing import Any, NamedTuple
 
-from link.codec import read_frames
+from link.codec import drop_partial, read_frames
 from link.mission import Origin
 from link.signing import Key, sim_stamp
 from vehicle.keystore import KeyStore
@@ -97,6 +97,8 @@ class Endpoint:
             self.counters.bad_frames += 1
             self.parser = _parser()
             return
+        if drop_partial(self.parser):  # a datagram is whole: its unfinished tail must not eat the next datagram
+            self.counters.bad_frames += 1
         self._source = source
         try:
             for m in msgs:
