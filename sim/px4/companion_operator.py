@@ -76,10 +76,8 @@ class PX4CompanionOperator(ThroughCompanion, PX4Operator):
         gs = self.gs
         mine = st.owner == gs.sysid
         if st.state == _AWAITING_CLAIM and mine:
-            if self.fresh(t) and (self.pending is None or self.pending.done):
-                self.pending = gs.claim(-1)
-                self.claims += 1
-                self.log.append((t, f"claiming [{st.epoch},{st.current}]"))
+            if self.fresh(t):
+                self.claim(t, st)
             return
         if st.state == _TELEOP and mine:
             if not self.returned and self.phase in _DRIVING and self.armed and self.mode == HOLD:
@@ -94,6 +92,7 @@ class PX4CompanionOperator(ThroughCompanion, PX4Operator):
                     self._set_mode(OFFBOARD)
                 return
             self.held_since = None
+            self.drives_home()
             self._step(t)
             if self.phase == "offboard":
                 self.returned = False  # taken back (``_after_failsafe``): from here the operator drives again

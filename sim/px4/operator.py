@@ -50,6 +50,9 @@ from sim.firmware.operator import (
 from sim.px4.hil import to_local
 from sim.px4.lockstep import HOLD, MAIN_OFFBOARD, OFFBOARD, RETURN
 
+CARROT_S = 4.0  # s: how far ahead on the way the operator puts its target, in travel time at the leg's speed
+CARROT_MIN_M = 2.0  # m: never nearer than this (PX4 slows to stop at its target)
+CARROT_STEP_M = 1.0  # m: the target is moved on once the rover's progress would move it this far
 STREAM_HZ = 10.0  # setpoints a second: PX4 wants more than 2 Hz for Offboard
 STREAM_LEAD_S = 1.0  # s of setpoints before the switch to Offboard, as PX4 requires a live stream for it
 RETURN_MODES = frozenset((HOLD, RETURN))  # where PX4's data-link failsafe puts the rover
@@ -105,6 +108,43 @@ class PX4Operator(FirmwareOperator):
         docstring)."""
         self.setpoint = (x, y)
         self.sent_target = (x, y)
+
+    def _steer(self, t: float, waypoint: tuple[float, float], speed: float) -> None:
+        """A position target on the way to ``waypoint`` (``_aim``), moved on as the rover goes."""
+        leg = self.resume if self.phase == "resuming" else self.leg
+        aim = self._aim(leg)
+        sent = self.sent_target
+        moved = sent is None or (aim != sent and (aim == waypoint or math.dist(aim, sent) >= CARROT_STEP_M))
+        if moved:
+            self._goto(*aim, speed)
+
+    def _hold_still(self, t: float) -> None:
+        """The route is driven: the last target, where PX4 stops, stays streamed."""
+
+    def _aim(self, leg) -> tuple[float, float]:
+        """Where to send the rover on its way to the leg's current waypoint: a point ``CARROT_S`` of travel at the
+        leg's speed (at least ``CARROT_MIN_M``) ahead of it on the stretch from the waypoint before, or the waypoint
+        itself when that is nearer or there is none.
+
+        Offboard steers straight at a position target, and a person steering a rover down a tunnel keeps it on the
+        way, not on the line from wherever it stands to a waypoint 45 m off: from a rest place beside the tunnel's
+        wall (where a return leaves it, 1.4 m off the middle at the bend) that line runs along the wall and the
+        rover scrapes it all the way."""
+        x, y = leg.points[leg.index][:2]
+        if leg.index == 0 or self.position is None:
+            return x, y
+        ax, ay = leg.points[leg.index - 1][:2]
+        dx, dy = x - ax, y - ay
+        length = math.hypot(dx, dy)
+        if length < 1e-9:
+            return x, y
+        ux, uy = dx / length, dy / length
+        speed = leg.points[leg.index][2]
+        along = max(0.0, (self.position[0] - ax) * ux + (self.position[1] - ay) * uy) + max(CARROT_MIN_M,
+                                                                                           CARROT_S * speed)
+        if along >= length:
+            return x, y
+        return ax + along * ux, ay + along * uy
 
     def _stream(self, t: float) -> None:
         if self.setpoint is None or self.frame is None or t < self.next_setpoint - 1e-9:
@@ -202,6 +242,8 @@ class PX4Operator(FirmwareOperator):
             self.cut_off = None
         self.log.append((t, "taking control back"))
         self.after_arming = "resuming"
+        if self.rejoin and self.position is not None:
+            self.resume.join(*self.position)  # picked up as the native operator picks it up (``Leg.join``)
         self._hold_here(t)
         self.stream_since = t - STREAM_LEAD_S  # the stream never stopped on this side: switch at once
         self.next_retry = t
