@@ -2,26 +2,25 @@
 
 It is the firmware's counterpart of ``sim.operator.Operator`` and knows only what reached it over the radio. It
 sends a GCS heartbeat every second (what keeps the firmware's GCS failsafe quiet, and nothing else does), asks for
-the local position at 5 Hz, switches to GUIDED and arms (retrying each second until the heartbeat shows it), then
-drives the scenario route as the native operator (``sim.operator.Operator``) drives its rover, so that a comparison
-of the two is one of returns, not of drivers: the same waypoints, each steered at straight from where the telemetry
-shows the rover, the next once it is within ``WAYPOINT_RADIUS``, the same speed (the leg's, slowing on the last
-metres to a waypoint) and the same turn on the spot where the heading is far off (``drive_setpoint``). GUIDED takes
-that as a GCS joystick script sends it, streamed at the native station's 10 Hz: a NED velocity
-(SET_POSITION_TARGET_LOCAL_NED, velocity only: the firmware holds the heading of the velocity and its speed) or,
-to turn on the spot, a heading alone (the firmware turns a skid-steered rover in place to it). Every waypoint of a
-generated world lies ``WAYPOINT_RADIUS`` beyond its corner so that this steering turns on the corner itself
-(``sim.worlds.build.waypoints``); the GUIDED position targets this operator used to send, a carrot on the line
-between waypoints, cut through door jambs on that line, and the firmware's own navigation rounded the corners.
+the local position and the attitude at 5 Hz, switches to GUIDED and arms (retrying each second until the heartbeat
+shows it), then drives the scenario route as the native operator drives its rover, so that a comparison of the two
+is one of returns, not of drivers: the same waypoints, each steered at straight from where the telemetry shows the
+rover, the next once it is within ``WAYPOINT_RADIUS``, the leg's speed, and the same turn on the spot where the
+heading is far off (``drive_setpoint``, which also slows before each corner). GUIDED takes that as a GCS joystick
+script sends it, streamed at the native station's 10 Hz: a NED velocity (SET_POSITION_TARGET_LOCAL_NED, velocity
+only: the firmware holds the heading of the velocity and its speed) or, to turn on the spot, a heading alone (the
+firmware turns a skid-steered rover in place to it). Every waypoint of a generated world lies ``WAYPOINT_RADIUS``
+beyond its corner so that this steering turns on the corner itself (``sim.worlds.build.waypoints``); the GUIDED
+position targets this operator used to send, a carrot on the line between waypoints, cut door jambs on that line.
 ArduPilot drops a velocity target not renewed for 3 s ("target not received last 3secs, stopping"), where the native
 rover's dead-man is 0.5 s: a rover whose uplink dies keeps its last heading and speed that much longer, which is
 the real firmware's and is what it does to a real operator.
 
-When its picture freezes it keeps its heartbeat going and stops streaming. When it hears the rover again and sees
-the firmware's failsafe has done its work (the rover in HOLD, or at rest in RTL/SMART_RTL for ``REST_S``), it takes
-control again (GUIDED) and drives the resume route, picked up as the native operator picks it up (``Leg.join``: at
-the leg the rover is on, never back into the dead zone for a waypoint the return brought it past); like the native
-operator it gives up a waypoint after ``attempts`` losses on the way to it.
+When its picture freezes it keeps its heartbeat going and lets go of its stick (``_hold_still``). When it hears the
+rover again and sees the firmware's failsafe has done its work (the rover in HOLD, or at rest in RTL/SMART_RTL for
+``REST_S``), it takes control again (GUIDED) and drives the resume route, picked up as the native operator picks it
+up (``Leg.join``: at the leg the rover is on, never back into the dead zone for a waypoint the return brought it
+past); like the native operator it gives up a waypoint after ``attempts`` losses on the way to it.
 
 Positions: the scenario route is in the world frame (x north, y east); the firmware's LOCAL_POSITION_NED is
 relative to its EKF origin, where the rover stood when it got its first fix, i.e. the scenario's start.
@@ -51,19 +50,27 @@ STOPPED = 0x05C7  # ... velocity and yaw rate used, all zero: GUIDED stops (the 
 LOCAL_POSITION_INTERVAL_US = 200_000
 ATTITUDE_INTERVAL_US = 200_000  # its heading, which the native vehicle reads aboard, reaches the operator here
 STICK_PERIOD = 0.1  # s: the drive is streamed as the native station streams its stick (gcs.station.TELEOP_PERIOD)
-APPROACH_GAIN, APPROACH_FLOOR = 0.6, 0.3  # speed <= 0.6 * distance + 0.3 m/s on the last metres to a waypoint
+APPROACH_GAIN = 0.6  # 1/s: speed <= 0.6 * distance to the turn + APPROACH_FLOOR on the last metres before it
+APPROACH_FLOOR = 0.2  # m/s
 
 
 def drive_setpoint(position: tuple[float, float], yaw: float | None, waypoint: tuple[float, float],
                    speed: float) -> tuple[float, float]:
     """(bearing, speed) the native rover drives toward ``waypoint`` at the leg's ``speed``: the native operator's
-    velocity (straight at the waypoint, slowing on the last metres: ``sim.operator.Operator._drive``) as its vehicle
-    executes it (``vehicle.teleop.velocity_to_command``: only the part along the heading, and none while the heading
-    is more than TURN_IN_PLACE off, where it turns on the spot first). Speed 0 with a bearing: turn to it in place.
-    ``yaw`` None (no heading heard yet): the speed as asked."""
+    velocity (straight at the waypoint: ``sim.operator.Operator._drive``) as its vehicle executes it
+    (``vehicle.teleop.velocity_to_command``: only the part along the heading, and none while the heading is more
+    than TURN_IN_PLACE off, where it turns on the spot first). Speed 0 with a bearing: turn to it in place. ``yaw``
+    None (no heading heard yet): the speed as asked.
+
+    One care more than the native operator's, which slows on the last metres to the waypoint itself: this one slows
+    on the last metres to where it turns, WAYPOINT_RADIUS short of the waypoint (the corner of the way: the next
+    waypoint is taken there), to APPROACH_FLOOR on the corner. The native vehicle turns at once on its own 50 Hz
+    heading; an autopilot's operator sees the rover at 5 Hz through the radio and the autopilot brakes by its own
+    tuning, so at the leg's speed a rover went 0.5-0.7 m past a door's corner before it turned and brushed the jamb
+    (gen:office seed 1, ArduPilot and PX4 alike)."""
     dn, de = waypoint[0] - position[0], waypoint[1] - position[1]
     bearing = math.atan2(de, dn)
-    s = min(speed, APPROACH_GAIN * math.hypot(dn, de) + APPROACH_FLOOR)
+    s = min(speed, APPROACH_GAIN * max(0.0, math.hypot(dn, de) - WAYPOINT_RADIUS) + APPROACH_FLOOR)
     if yaw is None:
         return bearing, s
     err = (bearing - yaw + math.pi) % (2 * math.pi) - math.pi
@@ -162,7 +169,11 @@ class FirmwareOperator:
             self._stick(t, HEADING_ONLY, yaw=bearing)
 
     def _hold_still(self, t: float) -> None:
-        """The route is driven: a zero stick, streamed as the native station streams it (``GroundStation.stop``)."""
+        """A zero stick, streamed as the native station streams it (``GroundStation.stop``): when the route is
+        driven, and when the picture has frozen. The native operator then stops streaming and its vehicle stops
+        0.5 s after the last setpoint (``vehicle.teleop.SETPOINT_TTL``); GUIDED keeps driving the last velocity for
+        3 s, so the operator lets go of its stick instead, which stops the rover as soon as any of it gets through
+        a fading link."""
         self._stick(t, STOPPED, frame=apm.MAV_FRAME_BODY_NED)
 
     def request_rtl(self, t: float) -> None:
@@ -212,7 +223,8 @@ class FirmwareOperator:
         fresh = self.fresh(t)
         if not fresh:
             self.cut_off = self.heading_to or self.cut_off
-            self.sent_target = None  # resend once the picture is back
+            if self.mode == GUIDED and self.phase in ("driving", "resuming"):
+                self._hold_still(t)  # the picture froze: it lets go of the stick (see ``_hold_still``)
             return
         if self.mode in RETURN_MODES:
             self.cut_off = self.heading_to or self.cut_off

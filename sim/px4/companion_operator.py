@@ -1,7 +1,7 @@
 """The scripted operator of a PX4 companion run: a person at a ground station flying a PX4 rover that has returnlink
 companion between its telemetry port and the radio (docs/architecture.md §11.2).
 
-It is the PX4 operator (``sim.px4.operator.PX4Operator``: Offboard position setpoints streamed at 10 Hz to PX4,
+It is the PX4 operator (``sim.px4.operator.PX4Operator``: Offboard setpoints streamed at 10 Hz to PX4,
 component 1) with the lease steps of the ArduPilot companion operator (``sim.firmware.companion_operator``) in
 front, taken through the same ground-station library addressed to the companion, component 191: it takes control
 (MAV_CMD_REQUEST_OPERATOR_CONTROL), uploads the scenario's return plan, and only then asks PX4 for its position
@@ -103,4 +103,4 @@ class PX4CompanionOperator(ThroughCompanion, PX4Operator):
         self.cut_off = self.heading_to or self.cut_off
         self.sent_target = None
         if self.position is not None:
-            self.setpoint = self.position
+            self.setpoint = ("position", *self.position)

@@ -1,29 +1,33 @@
 """The scripted operator of a PX4 run: a person at a ground station flying a PX4 rover in Offboard.
 
 It is the PX4 counterpart of ``sim.firmware.operator.FirmwareOperator`` (whose route following it shares: the
-waypoints, the carrot on the way to each, giving a waypoint up after ``attempts`` losses) and knows only what
-reached it over the radio. Why Offboard with position setpoints:
+waypoints, the native operator's steering toward each, the resume route picked up after a return, giving a waypoint
+up after ``attempts`` losses) and knows only what reached it over the radio. Why Offboard with velocity setpoints:
 - PX4 rover drives a ground station's route in three ways: a mission (AUTO_MISSION, uploaded whole, which is not how
   the scenario's operator drives: it decides leg by leg from what it sees), Manual/Position with MANUAL_CONTROL
   sticks (COM_RC_IN_MODE 1 in SITL; the runs preset 4, no stick input, so nothing waits for or fails over an RC
   link nobody simulates), or Offboard. Offboard is the GUIDED of PX4, what ArduPilot's operator flies.
-- Position, not velocity, setpoints (SET_POSITION_TARGET_LOCAL_NED, position only): PX4 rover drives to the point by
-  pure pursuit and stops there, as ArduPilot's GUIDED position target does. A velocity setpoint is a bearing and a
-  speed that PX4 keeps executing while the stream is silent (until COM_OF_LOSS_T, which the runs set long so that
-  the data-link failsafe is what they measure): after a loss the rover would drive blind on its last bearing,
-  into the tunnel's wall at the bend, instead of to the operator's last aim point a few metres along the way.
-  PX4's Offboard position target has no speed (the rover drives at RO_SPEED_LIM, slowing to stop at the target),
-  so the plant sets RO_SPEED_LIM to the fastest speed of the scenario's routes.
+- Velocity setpoints (SET_POSITION_TARGET_LOCAL_NED, velocity only), steered as the native operator steers its rover
+  (``sim.firmware.operator.drive_setpoint``: straight at each waypoint at the leg's speed, slowing before the corner,
+  turning on the spot where the heading is far off), so that a comparison with the native rover is one of returns,
+  not of drivers. PX4's differential rover reads a velocity target as a speed and a bearing, turns to the bearing (on
+  the spot when more than RD_TRANS_DRV_TRN off) and drives along it (``vehicle.companion.px4``). The position
+  targets this operator used to send, a carrot on the line between waypoints, cut door jambs on that line: a
+  generated world puts each waypoint WAYPOINT_RADIUS beyond its corner for the native steering. A velocity target is
+  kept while the stream is silent (until COM_OF_LOSS_T, which the runs set long so that the data-link failsafe is
+  what they measure): when its picture freezes, the operator lets go of its stick (a target of STOP_SPEED along the
+  last bearing, streamed on), and a rover whose uplink died drives its last velocity until PX4's failsafe, which is
+  PX4's own behaviour. Position targets stay for standing still before Offboard and after a failsafe.
 - The stream: Offboard needs setpoints before the switch and leaves Offboard when they stop for COM_OF_LOSS_T, so
   the operator streams its current target at ``STREAM_HZ`` from before arming to the end, as an offboard program
-  does, whatever its picture; a frozen picture only stops it moving the target on.
+  does, whatever its picture; a frozen picture only makes it a standstill.
 
 It sends a GCS heartbeat every second (PX4 counts only a GCS-type HEARTBEAT as its data link), learns PX4's system
-id from its HEARTBEAT (instance + 1), asks for LOCAL_POSITION_NED at 5 Hz, streams a target where the rover stands
-for ``STREAM_LEAD_S``, arms, switches to Offboard (each retried every second until the heartbeat shows it), then
-drives the route. When the link comes back and PX4's failsafe has done its work (the rover in Hold, or at rest in
-Return for ``REST_S``) it takes control again (Offboard; arming again first if PX4 disarmed) and drives the resume
-route, as the ArduPilot operator does.
+id from its HEARTBEAT (instance + 1), asks for LOCAL_POSITION_NED and ATTITUDE at 5 Hz, streams a target where the
+rover stands for ``STREAM_LEAD_S``, arms, switches to Offboard (each retried every second until the heartbeat shows
+it), then drives the route. When the link comes back and PX4's failsafe has done its work (the rover in Hold, or at
+rest in Return for ``REST_S``) it takes control again (Offboard; arming again first if PX4 disarmed) and drives the
+resume route, as the ArduPilot operator does.
 
 Positions: the scenario route is in the true frame (x north, y east); PX4's LOCAL_POSITION_NED is relative to its
 EKF2 origin, which the operator places from HOME_POSITION (its global position, converted around the scenario's GPS
@@ -38,6 +42,7 @@ from pymavlink.dialects.v20 import common as mav
 
 from link.mission import Origin
 from sim.firmware.operator import (
+    ATTITUDE_INTERVAL_US,
     GCS_COMPID,
     GCS_SYSID,
     LOCAL_POSITION_INTERVAL_US,
@@ -45,14 +50,14 @@ from sim.firmware.operator import (
     REST_S,
     REST_SPEED,
     RETRY_S,
+    VELOCITY_ONLY,
     FirmwareOperator,
+    drive_setpoint,
 )
 from sim.px4.hil import to_local
 from sim.px4.lockstep import HOLD, MAIN_OFFBOARD, OFFBOARD, RETURN
 
-CARROT_S = 4.0  # s: how far ahead on the way the operator puts its target, in travel time at the leg's speed
-CARROT_MIN_M = 2.0  # m: never nearer than this (PX4 slows to stop at its target)
-CARROT_STEP_M = 1.0  # m: the target is moved on once the rover's progress would move it this far
+STOP_SPEED = 1e-3  # m/s: a velocity target that means "stand still facing this way" (a zero vector is bearing north)
 STREAM_HZ = 10.0  # setpoints a second: PX4 wants more than 2 Hz for Offboard
 STREAM_LEAD_S = 1.0  # s of setpoints before the switch to Offboard, as PX4 requires a live stream for it
 RETURN_MODES = frozenset((HOLD, RETURN))  # where PX4's data-link failsafe puts the rover
@@ -69,7 +74,8 @@ class PX4Operator(FirmwareOperator):
         self.mav.robust_parsing = True
         self.geo = geo
         self.frame: tuple[float, float] | None = None  # PX4's local (0, 0) in the true frame, from HOME_POSITION
-        self.setpoint: tuple[float, float] | None = None  # the target streamed (true frame)
+        # the target streamed: ("position", x, y) in the true frame or ("velocity", bearing, speed)
+        self.setpoint: tuple[str, float, float] | None = None
         self.next_setpoint = 0.0
         self.stream_since: float | None = None
         self.after_arming = "driving"  # the phase arming leads to (driving, or resuming after a re-arm)
@@ -88,6 +94,8 @@ class PX4Operator(FirmwareOperator):
             if kind == "HOME_POSITION":
                 hx, hy = to_local(self.geo, msg.latitude / 1e7, msg.longitude / 1e7)
                 self.frame = (hx - msg.x, hy - msg.y)
+            elif kind == "ATTITUDE":
+                self.yaw = msg.yaw
             elif kind == "LOCAL_POSITION_NED" and self.frame is not None:
                 self.position = (self.frame[0] + msg.x, self.frame[1] + msg.y)
                 self.speed = math.hypot(msg.vx, msg.vy)
@@ -104,55 +112,43 @@ class PX4Operator(FirmwareOperator):
                       (mode >> 24) & 0xFF)
 
     def _goto(self, x: float, y: float, speed: float) -> None:
-        """The new target, streamed from now on (PX4's Offboard position target has no speed: see the module
-        docstring)."""
-        self.setpoint = (x, y)
-        self.sent_target = (x, y)
+        """A position target where PX4 drives and stops, streamed from now on (PX4's Offboard position target has
+        no speed)."""
+        self.setpoint = ("position", x, y)
 
     def _steer(self, t: float, waypoint: tuple[float, float], speed: float) -> None:
-        """A position target on the way to ``waypoint`` (``_aim``), moved on as the rover goes."""
-        leg = self.resume if self.phase == "resuming" else self.leg
-        aim = self._aim(leg)
-        sent = self.sent_target
-        moved = sent is None or (aim != sent and (aim == waypoint or math.dist(aim, sent) >= CARROT_STEP_M))
-        if moved:
-            self._goto(*aim, speed)
+        """Drive toward ``waypoint`` at the leg's ``speed`` as the native rover would (``drive_setpoint``): a velocity
+        target, streamed from now on; one of STOP_SPEED along the bearing turns the rover to it on the spot."""
+        if self.position is None:
+            return
+        bearing, s = drive_setpoint(self.position, self.yaw, waypoint, speed)
+        self.setpoint = ("velocity", bearing, s)
 
     def _hold_still(self, t: float) -> None:
-        """The route is driven: the last target, where PX4 stops, stays streamed."""
-
-    def _aim(self, leg) -> tuple[float, float]:
-        """Where to send the rover on its way to the leg's current waypoint: a point ``CARROT_S`` of travel at the
-        leg's speed (at least ``CARROT_MIN_M``) ahead of it on the stretch from the waypoint before, or the waypoint
-        itself when that is nearer or there is none.
-
-        Offboard steers straight at a position target, and a person steering a rover down a tunnel keeps it on the
-        way, not on the line from wherever it stands to a waypoint 45 m off: from a rest place beside the tunnel's
-        wall (where a return leaves it, 1.4 m off the middle at the bend) that line runs along the wall and the
-        rover scrapes it all the way."""
-        x, y = leg.points[leg.index][:2]
-        if leg.index == 0 or self.position is None:
-            return x, y
-        ax, ay = leg.points[leg.index - 1][:2]
-        dx, dy = x - ax, y - ay
-        length = math.hypot(dx, dy)
-        if length < 1e-9:
-            return x, y
-        ux, uy = dx / length, dy / length
-        speed = leg.points[leg.index][2]
-        along = max(0.0, (self.position[0] - ax) * ux + (self.position[1] - ay) * uy) + max(CARROT_MIN_M,
-                                                                                           CARROT_S * speed)
-        if along >= length:
-            return x, y
-        return ax + along * ux, ay + along * uy
+        """Stand still facing the way it faces (the route is driven, or the picture froze: the native operator stops
+        pushing its stick): a velocity target of STOP_SPEED along the last bearing streamed, or a position target
+        where it stands when it was not driving by velocity."""
+        sp = self.setpoint
+        if sp is not None and sp[0] == "velocity":
+            self.setpoint = ("velocity", sp[1], 0.0)
+        elif sp is None and self.position is not None:
+            self._goto(*self.position, 0.0)
 
     def _stream(self, t: float) -> None:
         if self.setpoint is None or self.frame is None or t < self.next_setpoint - 1e-9:
             return
         self.next_setpoint = t + 1.0 / STREAM_HZ
-        n, e = self.setpoint[0] - self.frame[0], self.setpoint[1] - self.frame[1]
-        self._send(mav.MAVLink_set_position_target_local_ned_message(
-            int(t * 1000), self.target, 1, mav.MAV_FRAME_LOCAL_NED, POSITION_ONLY, n, e, 0, 0, 0, 0, 0, 0, 0, 0, 0))
+        kind, a, b = self.setpoint
+        if kind == "position":
+            n, e = a - self.frame[0], b - self.frame[1]
+            self._send(mav.MAVLink_set_position_target_local_ned_message(
+                int(t * 1000), self.target, 1, mav.MAV_FRAME_LOCAL_NED, POSITION_ONLY, n, e, 0, 0, 0, 0, 0, 0, 0,
+                0, 0))
+        else:
+            v = max(b, STOP_SPEED)
+            self._send(mav.MAVLink_set_position_target_local_ned_message(
+                int(t * 1000), self.target, 1, mav.MAV_FRAME_LOCAL_NED, VELOCITY_ONLY, 0, 0, 0, v * math.cos(a),
+                v * math.sin(a), 0, 0, 0, 0, 0, 0))
 
     def tick(self, t: float) -> list[bytes]:
         self.out = []
@@ -176,6 +172,7 @@ class PX4Operator(FirmwareOperator):
                 self.next_retry = t + RETRY_S
                 self._command(mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
                               LOCAL_POSITION_INTERVAL_US)
+                self._command(mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAVLINK_MSG_ID_ATTITUDE, ATTITUDE_INTERVAL_US)
             if self.fresh(t):
                 self._hold_here(t)
                 self.phase = "arming"
@@ -194,6 +191,7 @@ class PX4Operator(FirmwareOperator):
         fresh = self.fresh(t)
         if not fresh:
             self.cut_off = self.heading_to or self.cut_off
+            self._hold_still(t)  # the picture froze: it stops pushing (the stream goes on, as Offboard needs)
             return
         if self.mode in RETURN_MODES or not self.armed:
             self._after_failsafe(t, retry)
