@@ -70,9 +70,7 @@ class ThroughCompanion:
         claims the fresh lease, and from here it drives the resume route, picked up where the return left the rover
         (``Leg.join``). Driving on along the way out instead took the rover straight back into the dead zone after
         every return: 7-8 losses of the link in a generated office's 170 s where the native rover has one."""
-        if self.cut_off is not None:
-            self.losses[self.cut_off] = self.losses.get(self.cut_off, 0) + 1
-            self.cut_off = None
+        self._count_loss()
         if self.pending is None or self.pending.done:
             self.pending = self.gs.claim(-1)
             self.claims += 1
@@ -88,6 +86,8 @@ class ThroughCompanion:
 
 
 class CompanionOperator(ThroughCompanion, FirmwareOperator):
+    lets_go = False  # a frozen picture stops its stream, as the native operator's does
+
     def __init__(self, route, resume_route, origin: tuple[float, float], plan: list[Item], attempts: int = 2,
                  sysid: int = GCS_SYSID, compid: int = GCS_COMPID, target_system: int = 1) -> None:
         super().__init__(route, resume_route, origin, attempts, sysid, compid, target_system)

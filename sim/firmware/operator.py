@@ -80,6 +80,12 @@ def drive_setpoint(position: tuple[float, float], yaw: float | None, waypoint: t
 
 
 class FirmwareOperator:
+    # whether a frozen picture streams a standstill (``_hold_still``) rather than nothing: not where what reaches the
+    # vehicle is judged as the native operator's stream (the companion's link watch: the native operator stops
+    # streaming then, and the companion's own dead-man stops the rover), nor where another program drives in GUIDED
+    # meanwhile (the applet)
+    lets_go = True
+
     def __init__(self, route, resume_route, origin: tuple[float, float], attempts: int = 2,
                  sysid: int = GCS_SYSID, compid: int = GCS_COMPID, target_system: int = 1,
                  rejoin: bool = True) -> None:
@@ -223,7 +229,7 @@ class FirmwareOperator:
         fresh = self.fresh(t)
         if not fresh:
             self.cut_off = self.heading_to or self.cut_off
-            if self.mode == GUIDED and self.phase in ("driving", "resuming"):
+            if self.lets_go and self.mode == GUIDED and self.phase in ("driving", "resuming"):
                 self._hold_still(t)  # the picture froze: it lets go of the stick (see ``_hold_still``)
             return
         if self.mode in RETURN_MODES:
@@ -235,9 +241,7 @@ class FirmwareOperator:
             if self.mode == HOLD or (self.rest_since is not None and t - self.rest_since >= REST_S):
                 if phase == "rtl":
                     return  # the operator asked for this return: it leaves the rover where RTL took it
-                if self.cut_off is not None:
-                    self.losses[self.cut_off] = self.losses.get(self.cut_off, 0) + 1
-                    self.cut_off = None
+                self._count_loss()
                 if retry:
                     self.next_retry = t + RETRY_S
                     self._set_mode(GUIDED)
@@ -255,6 +259,14 @@ class FirmwareOperator:
             self._hold_still(t)
             return
         self._drive(leg, t)
+
+    def _count_loss(self) -> None:
+        """The rover came back without the link: the waypoint it was driving toward counts one loss, once (it is
+        driven toward again only when the operator drives again)."""
+        if self.cut_off is not None:
+            self.losses[self.cut_off] = self.losses.get(self.cut_off, 0) + 1
+            self.cut_off = None
+        self.heading_to = None
 
     def _rejoin(self) -> None:
         """After a return, the resume route picked up where the native operator picks it up (``Leg.join``)."""

@@ -235,9 +235,7 @@ class PX4Operator(FirmwareOperator):
             return
         if self.phase == "rtl":
             return  # the operator asked for this return: it leaves the rover where Return took it
-        if self.cut_off is not None:
-            self.losses[self.cut_off] = self.losses.get(self.cut_off, 0) + 1
-            self.cut_off = None
+        self._count_loss()
         self.log.append((t, "taking control back"))
         self.after_arming = "resuming"
         if self.rejoin and self.position is not None:
