@@ -6,7 +6,9 @@ fed the MAVLink an autopilot would send and what they send back is read."""
 from __future__ import annotations
 
 import math
+import os
 
+import pytest
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from gcs.station import LeaseStatus, mav
@@ -30,6 +32,7 @@ ROUTE = ((13.141, 0.0, 1.0), (11.641, 4.556, 1.0), (14.639, 4.939, 1.0))
 RESUME = ((10.371, 2.258, 1.2), (11.641, -1.5, 1.2), (-7.044, 0.0, 1.2))
 START = (-7.044, 0.0)
 ROVER = apm.MAVLink(None, srcSystem=1, srcComponent=1)
+DRIVE_S = 40.0  # s of gen:office seed 1: the door near 23 s, the link lost in the room near 30 s
 
 
 def rover_says(op: FirmwareOperator, t: float, mode: int, at: tuple[float, float], yaw: float,
@@ -141,3 +144,33 @@ def test_the_companions_operator_claims_and_drives_home_as_the_native_one_does()
     assert op.phase == "resuming"
     assert op.resume.index == 2
     assert op.losses == {ROUTE[2][:2]: 1}
+
+
+@pytest.mark.firmware
+def test_the_firmware_drives_into_the_generated_offices_far_room_touching_no_wall(tmp_path):
+    """gen:office seed 1 flown by ArduPilot's GUIDED under the operator: along the corridor, through the door, into
+    the room where the link dies. The carrot position targets cut the door's jamb and drove on into the room's walls
+    (8 contacts before the first return); the native steering without the slow-down turned half a metre past the
+    door's middle and brushed the jamb, and drove into the partition on a stale velocity. Firmware instances from
+    130 (no other test file starts there)."""
+    from sim.firmware.process import INSTANCE_ENV
+    from sim.firmware.run import FirmwareRun
+    from sim.worlds.resolve import load
+    from tests.firmware_helpers import firmware_or_skip
+
+    firmware = firmware_or_skip()
+    old = os.environ.get(INSTANCE_ENV)
+    os.environ[INSTANCE_ENV] = "130"
+    try:
+        sc, _ = load("gen:office", 1)
+        run = FirmwareRun(sc, 1, "ardupilot-smartrtl", firmware, duration=DRIVE_S, log_path=tmp_path / "fw.log").run()
+    finally:
+        if old is None:
+            os.environ.pop(INSTANCE_ENV, None)
+        else:
+            os.environ[INSTANCE_ENV] = old
+    rows = run.rows  # (t, x, y, est x, est y, mode, link, rssi, speed cmd, yaw rate cmd, armed, collisions so far)
+    guided = [r for r in rows if r[5] == GUIDED]
+    assert max(r[1] for r in guided) > 11.0 and max(r[2] for r in guided) > 3.0  # it got through the door
+    touched = sum(1 for a, b in zip(rows, rows[1:], strict=False) if b[11] > a[11] and b[5] == GUIDED)
+    assert touched == 0
