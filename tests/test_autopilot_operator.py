@@ -55,9 +55,9 @@ def targets(frames: list[bytes]) -> list:
             if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED"]
 
 
-def driving(t: float = 10.0) -> FirmwareOperator:
+def driving(rejoin: bool = True) -> FirmwareOperator:
     """An operator past its set-up, driving the way out in GUIDED."""
-    op = FirmwareOperator(ROUTE, RESUME, START)
+    op = FirmwareOperator(ROUTE, RESUME, START, rejoin=rejoin)
     op.phase = "driving"
     op.mode, op.armed = GUIDED, True
     return op
@@ -106,10 +106,12 @@ def test_the_firmware_operator_streams_velocity_and_turns_into_the_door_on_the_s
     assert math.isclose(turn[0].yaw, math.atan2(ROUTE[1][1], ROUTE[1][0] - op.position[0]), abs_tol=1e-6)
 
 
-def test_after_a_return_the_firmware_operator_drives_home_from_where_the_return_left_the_rover():
+@pytest.mark.parametrize("rejoin", [True, False])
+def test_after_a_return_the_firmware_operator_drives_home_from_where_the_return_left_the_rover(rejoin):
     """SmartRTL brought the rover back down the corridor past the door: the way home is the resume route's last
-    leg, as the native operator picks it up (``Leg.join``); its first waypoint, in the room, is where the link died."""
-    op = driving()
+    leg, as the native operator picks it up (``Leg.join``); its first waypoint, in the room, is where the link died.
+    A scenario's ``rejoin = false`` keeps the stubborn operator who drives every waypoint home."""
+    op = driving(rejoin)
     op.leg.index = 2  # through the door, on the last leg
     rover_says(op, 30.0, GUIDED, (13.0, 4.8), 0.3, 1.0)
     op.tick(30.0)
@@ -119,7 +121,7 @@ def test_after_a_return_the_firmware_operator_drives_home_from_where_the_return_
         rover_says(op, t, SMART_RTL, (6.6, -0.1), math.pi, 0.0)
         out += op.tick(t)
     assert op.phase == "resuming"
-    assert op.resume.index == 2
+    assert op.resume.index == (2 if rejoin else 0)
     assert op.losses == {ROUTE[2][:2]: 1}  # once for the one return, however long it takes to take over
     parser = apm.MAVLink(None)
     assert any(m.get_type() == "COMMAND_LONG" and m.command == apm.MAV_CMD_DO_SET_MODE and m.param2 == GUIDED

@@ -89,8 +89,9 @@ class CompanionOperator(ThroughCompanion, FirmwareOperator):
     lets_go = False  # a frozen picture stops its stream, as the native operator's does
 
     def __init__(self, route, resume_route, origin: tuple[float, float], plan: list[Item], attempts: int = 2,
-                 sysid: int = GCS_SYSID, compid: int = GCS_COMPID, target_system: int = 1) -> None:
-        super().__init__(route, resume_route, origin, attempts, sysid, compid, target_system)
+                 sysid: int = GCS_SYSID, compid: int = GCS_COMPID, target_system: int = 1,
+                 rejoin: bool = True) -> None:
+        super().__init__(route, resume_route, origin, attempts, sysid, compid, target_system, rejoin)
         self.gs = GroundStation(sysid, compid, target=target_system, target_comp=COMPANION_COMPID)
         self.plan = plan
         self.pending = None  # the lease command in flight (acquire, claim)

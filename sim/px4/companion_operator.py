@@ -37,8 +37,8 @@ class PX4CompanionOperator(ThroughCompanion, PX4Operator):
     """The PX4 operator behind returnlink companion (see the module docstring)."""
 
     def __init__(self, route, resume_route, geo: Origin, plan: list[Item], attempts: int = 2,
-                 sysid: int = GCS_SYSID, compid: int = GCS_COMPID) -> None:
-        super().__init__(route, resume_route, geo, attempts, sysid, compid)
+                 sysid: int = GCS_SYSID, compid: int = GCS_COMPID, rejoin: bool = True) -> None:
+        super().__init__(route, resume_route, geo, attempts, sysid, compid, rejoin)
         # PX4's system id (its instance + 1) is learnt from its HEARTBEAT: the station is pointed at it then
         self.gs = GroundStation(sysid, compid, target=0, target_comp=COMPANION_COMPID)
         self.plan = plan

@@ -68,8 +68,8 @@ class PX4Operator(FirmwareOperator):
     origin, where the map's (0, 0) lies on the globe."""
 
     def __init__(self, route, resume_route, geo: Origin, attempts: int = 2, sysid: int = GCS_SYSID,
-                 compid: int = GCS_COMPID) -> None:
-        super().__init__(route, resume_route, (0.0, 0.0), attempts, sysid, compid, target_system=0)
+                 compid: int = GCS_COMPID, rejoin: bool = True) -> None:
+        super().__init__(route, resume_route, (0.0, 0.0), attempts, sysid, compid, target_system=0, rejoin=rejoin)
         self.mav = mav.MAVLink(None, srcSystem=sysid, srcComponent=compid)
         self.mav.robust_parsing = True
         self.geo = geo
