@@ -93,10 +93,12 @@ def test_the_companion_regains_the_link_by_its_return_and_rests_near_the_loss(cl
     assert math.dist(m["rest_position"], (-5.0, 0.0)) > 30
     assert m["trail_points"] > 5 and m["trail_max_deviation_m"] is not None
     assert m["stale_commands_executed"] == 0 and m["estimator_rmse_m"] < 1.0
-    # the firmware drove the return in GUIDED and the companion left it in HOLD when the link came back
+    # the firmware drove the return in GUIDED; when the link came back the companion braked it there with zero
+    # targets, then HOLD, unless the operator had claimed and driven it on first (its targets end the brake,
+    # vehicle/companion/app.py: the operator streams its stick at 10 Hz from the claim on, as the native one does)
     modes = [(e["t"], e["mode"]) for e in m["firmware_modes"]]
     assert [name for _t, name in modes][:2] == ["MANUAL", "GUIDED"]
-    assert any(name == "HOLD" and t >= m["link_regained_s"] - 0.1 for t, name in modes)
+    assert {name for t, name in modes if t >= m["link_regained_s"] - 0.1} <= {"GUIDED", "HOLD"}
     assert "SMART_RTL" not in [name for _t, name in modes]  # the firmware's own failsafe never fired
     assert "the companion forwarded" in text and "firmware modes:" in text
 
@@ -204,7 +206,9 @@ def test_commands_sent_during_the_return_are_refused_never_forwarded(firmware, i
     run = StubbornRun(load("tunnel"), 1, firmware=firmware, duration=DURATION).run()
     m = metrics.compute(run)
     assert run.audit_stale == 0 and m["stale_commands_executed"] == 0
-    assert m["commands_rejected"] > 20 and run.companion.counters["refused"] > 20
+    # since the operator drives the native steering the return lasted 3 s here, its stream through a fading link:
+    # 11 refused (more than 20 when the return was longer)
+    assert m["commands_rejected"] > 5 and run.companion.counters["refused"] > 5
     assert m["regained_by"] == "return" and m["blocks"][0]["reason"] == "LINK_REGAINED"
 
 

@@ -60,8 +60,11 @@ def test_smartrtl_turns_back_by_itself_after_the_link_dies(runs):
     assert modes(runs["ardupilot-smartrtl"])[:3] == ["MANUAL", "GUIDED", "SMART_RTL"]
     assert m["firmware"].startswith("ArduRover V")
     assert m["loss_position"][0] > 30  # the link died deep in the adit
-    # FS_GCS_TIMEOUT = LNK_TIMEOUT, then FS_TIMEOUT (1.5 s) before the action: ArduPilot's documented rule
-    assert 1.0 <= m["reaction_latency_s"] <= 2.5
+    # FS_GCS_TIMEOUT = LNK_TIMEOUT after the last GCS heartbeat, then FS_TIMEOUT (1.5 s) before the action:
+    # ArduPilot's documented rule. The loss is timed from the last frame the firmware heard, and the operator
+    # streams its stick at 10 Hz between its 1 Hz heartbeats (sim/firmware/operator.py), so it can fall up to 1 s
+    # after the last heartbeat the failsafe counts
+    assert 0.4 <= m["reaction_latency_s"] <= 2.5
     assert m["distance_back_m"] > 30 and m["rest_position"][0] < 5  # it retraced the drift towards home
     assert m["regained_by"] == "return" and m["link_regained_s"] > m["return_started_s"]
     assert m["lease_events"] == [] and m["stale_commands_executed"] is None  # no leases in the firmware: said

@@ -23,6 +23,8 @@ DONE_WORDS = ("stopped:", "ended:", "no return:")  # ... when it is over (or nev
 class AppletOperator(FirmwareOperator):
     """``applet_timeout``: the applet's RLNK_TIMEOUT, which the owner set."""
 
+    lets_go = False  # a frozen picture sends the applet nothing that could read as the pilot's
+
     def __init__(self, *args, applet_timeout: float = 3.0, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.applet_timeout = applet_timeout

@@ -2,17 +2,25 @@
 
 It is the firmware's counterpart of ``sim.operator.Operator`` and knows only what reached it over the radio. It
 sends a GCS heartbeat every second (what keeps the firmware's GCS failsafe quiet, and nothing else does), asks for
-the local position at 5 Hz, switches to GUIDED and arms (retrying each second until the heartbeat shows it), then
-drives the scenario route as a GUIDED user does: a speed (DO_CHANGE_SPEED) and position targets
-(SET_POSITION_TARGET_LOCAL_NED, position only; the firmware steers) that keep the rover on the way to each waypoint
-(``_aim``), the next waypoint once its telemetry shows the rover within ``WAYPOINT_RADIUS``. Position targets do not
-time out in Rover: a target sent before the link died is still driven to until the failsafe changes the mode, which
-is what the real firmware does to a real operator.
+the local position and the attitude at 5 Hz, switches to GUIDED and arms (retrying each second until the heartbeat
+shows it), then drives the scenario route as the native operator drives its rover, so that a comparison of the two
+is one of returns, not of drivers: the same waypoints, each steered at straight from where the telemetry shows the
+rover, the next once it is within ``WAYPOINT_RADIUS``, the leg's speed, and the same turn on the spot where the
+heading is far off (``drive_setpoint``, which also slows before each corner). GUIDED takes that as a GCS joystick
+script sends it, streamed at the native station's 10 Hz: a NED velocity (SET_POSITION_TARGET_LOCAL_NED, velocity
+only: the firmware holds the heading of the velocity and its speed) or, to turn on the spot, a heading alone (the
+firmware turns a skid-steered rover in place to it). Every waypoint of a generated world lies ``WAYPOINT_RADIUS``
+beyond its corner so that this steering turns on the corner itself (``sim.worlds.build.waypoints``); the GUIDED
+position targets this operator used to send, a carrot on the line between waypoints, cut door jambs on that line.
+ArduPilot drops a velocity target not renewed for 3 s ("target not received last 3secs, stopping"), where the native
+rover's dead-man is 0.5 s: a rover whose uplink dies keeps its last heading and speed that much longer, which is
+the real firmware's and is what it does to a real operator.
 
-When its picture freezes it keeps its heartbeat going and stops sending targets. When it hears the rover again and
-sees the firmware's failsafe has done its work (the rover in HOLD, or at rest in RTL/SMART_RTL for
-``REST_S``), it takes control again (GUIDED) and drives the resume route; like the native operator it gives up a
-waypoint after ``attempts`` losses on the way to it.
+When its picture freezes it keeps its heartbeat going and lets go of its stick (``_hold_still``). When it hears the
+rover again and sees the firmware's failsafe has done its work (the rover in HOLD, or at rest in RTL/SMART_RTL for
+``REST_S``), it takes control again (GUIDED) and drives the resume route, picked up as the native operator picks it
+up (``Leg.join``: at the leg the rover is on, never back into the dead zone for a waypoint the return brought it
+past); like the native operator it gives up a waypoint after ``attempts`` losses on the way to it.
 
 Positions: the scenario route is in the world frame (x north, y east); the firmware's LOCAL_POSITION_NED is
 relative to its EKF origin, where the rover stood when it got its first fix, i.e. the scenario's start.
@@ -25,6 +33,7 @@ import math
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from sim.operator import Leg
+from vehicle.navigation import TURN_IN_PLACE
 
 GCS_SYSID, GCS_COMPID = 255, 190
 WAYPOINT_RADIUS = 1.5  # m
@@ -35,15 +44,51 @@ REST_SPEED = 0.1  # m/s
 GUIDED, HOLD, RTL, SMART_RTL = 15, 4, 11, 12
 RETURN_MODES = frozenset((HOLD, RTL, SMART_RTL))
 POSITION_ONLY = 0x0DF8  # SET_POSITION_TARGET type mask: x, y, z used; velocity, acceleration, yaw, yaw rate not
+VELOCITY_ONLY = 0x0DC7  # ... vx, vy, vz used: ArduPilot Rover's GUIDED drives the velocity's heading at its speed
+HEADING_ONLY = 0x09FF  # ... yaw used: a skid-steered rover turns on the spot to it (GUIDED, speed 0)
+STOPPED = 0x05C7  # ... velocity and yaw rate used, all zero: GUIDED stops (the native station's zero stick)
 LOCAL_POSITION_INTERVAL_US = 200_000
-CARROT_S = 4.0  # s: how far ahead on the way the operator puts its target, in travel time at the leg's speed
-CARROT_MIN_M = 2.0  # m: never nearer than this (beyond the firmware's WP_RADIUS of 1 m, where it would stop)
-CARROT_STEP_M = 1.0  # m: the target is moved on once the rover's progress would move it this far
+ATTITUDE_INTERVAL_US = 200_000  # its heading, which the native vehicle reads aboard, reaches the operator here
+STICK_PERIOD = 0.1  # s: the drive is streamed as the native station streams its stick (gcs.station.TELEOP_PERIOD)
+APPROACH_GAIN = 0.6  # 1/s: speed <= 0.6 * distance to the turn + APPROACH_FLOOR on the last metres before it
+APPROACH_FLOOR = 0.2  # m/s
+
+
+def drive_setpoint(position: tuple[float, float], yaw: float | None, waypoint: tuple[float, float],
+                   speed: float) -> tuple[float, float]:
+    """(bearing, speed) the native rover drives toward ``waypoint`` at the leg's ``speed``: the native operator's
+    velocity (straight at the waypoint: ``sim.operator.Operator._drive``) as its vehicle executes it
+    (``vehicle.teleop.velocity_to_command``: only the part along the heading, and none while the heading is more
+    than TURN_IN_PLACE off, where it turns on the spot first). Speed 0 with a bearing: turn to it in place. ``yaw``
+    None (no heading heard yet): the speed as asked.
+
+    One care more than the native operator's, which slows on the last metres to the waypoint itself: this one slows
+    on the last metres to where it turns, WAYPOINT_RADIUS short of the waypoint (the corner of the way: the next
+    waypoint is taken there), to APPROACH_FLOOR on the corner. The native vehicle turns at once on its own 50 Hz
+    heading; an autopilot's operator sees the rover at 5 Hz through the radio and the autopilot brakes by its own
+    tuning, so at the leg's speed a rover went 0.5-0.7 m past a door's corner before it turned and brushed the jamb
+    (gen:office seed 1, ArduPilot and PX4 alike)."""
+    dn, de = waypoint[0] - position[0], waypoint[1] - position[1]
+    bearing = math.atan2(de, dn)
+    s = min(speed, APPROACH_GAIN * max(0.0, math.hypot(dn, de) - WAYPOINT_RADIUS) + APPROACH_FLOOR)
+    if yaw is None:
+        return bearing, s
+    err = (bearing - yaw + math.pi) % (2 * math.pi) - math.pi
+    if abs(err) > TURN_IN_PLACE:
+        return bearing, 0.0
+    return bearing, s * math.cos(err)
 
 
 class FirmwareOperator:
+    # whether a frozen picture streams a standstill (``_hold_still``) rather than nothing: not where what reaches the
+    # vehicle is judged as the native operator's stream (the companion's link watch: the native operator stops
+    # streaming then, and the companion's own dead-man stops the rover), nor where another program drives in GUIDED
+    # meanwhile (the applet)
+    lets_go = True
+
     def __init__(self, route, resume_route, origin: tuple[float, float], attempts: int = 2,
-                 sysid: int = GCS_SYSID, compid: int = GCS_COMPID, target_system: int = 1) -> None:
+                 sysid: int = GCS_SYSID, compid: int = GCS_COMPID, target_system: int = 1,
+                 rejoin: bool = True) -> None:
         self.mav = apm.MAVLink(None, srcSystem=sysid, srcComponent=compid)
         self.mav.robust_parsing = True
         self.target = target_system
@@ -51,6 +96,7 @@ class FirmwareOperator:
         self.leg = Leg(tuple(route))
         self.resume = Leg(tuple(resume_route))
         self.attempts = attempts
+        self.rejoin = rejoin  # False: after a return it drives every waypoint of its way home (Operator.rejoin)
         self.phase = "connect"
         self.out: list[bytes] = []
         self.next_heartbeat = 0.0
@@ -59,9 +105,11 @@ class FirmwareOperator:
         self.armed = False
         self.position: tuple[float, float] | None = None  # world frame, from the last LOCAL_POSITION_NED
         self.speed = 0.0
+        self.yaw: float | None = None  # the rover's heading, from the last ATTITUDE
         self.last_position_t: float | None = None
         self.rest_since: float | None = None
         self.sent_target: tuple[float, float] | None = None
+        self.next_stick = 0.0
         self.heading_to: tuple[float, float] | None = None
         self.cut_off: tuple[float, float] | None = None
         self.losses: dict[tuple[float, float], int] = {}
@@ -81,6 +129,8 @@ class FirmwareOperator:
                 self.position = (self.origin[0] + msg.x, self.origin[1] + msg.y)
                 self.speed = math.hypot(msg.vx, msg.vy)
                 self.last_position_t = t
+            elif kind == "ATTITUDE":
+                self.yaw = msg.yaw
             elif kind == "STATUSTEXT":
                 self._text_heard(msg.text, t)
 
@@ -104,12 +154,33 @@ class FirmwareOperator:
     def _set_mode(self, mode: int) -> None:
         self._command(apm.MAV_CMD_DO_SET_MODE, apm.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode)
 
-    def _goto(self, x: float, y: float, speed: float) -> None:
-        self._command(apm.MAV_CMD_DO_CHANGE_SPEED, 1, speed, -1)
-        n, e = x - self.origin[0], y - self.origin[1]
+    def _stick(self, t: float, mask: int, vn: float = 0.0, ve: float = 0.0, yaw: float = 0.0,
+               frame: int = apm.MAV_FRAME_LOCAL_NED) -> None:
+        """One setpoint of the streamed drive, at most one every STICK_PERIOD."""
+        if t < self.next_stick - 1e-9:
+            return
+        self.next_stick = t + STICK_PERIOD
         self._send(apm.MAVLink_set_position_target_local_ned_message(
-            0, self.target, 1, apm.MAV_FRAME_LOCAL_NED, POSITION_ONLY, n, e, 0, 0, 0, 0, 0, 0, 0, 0, 0))
-        self.sent_target = (x, y)
+            0, self.target, 1, frame, mask, 0, 0, 0, vn, ve, 0, 0, 0, 0, yaw, 0))
+
+    def _steer(self, t: float, waypoint: tuple[float, float], speed: float) -> None:
+        """Drive toward ``waypoint`` at the leg's ``speed`` as the native rover would (``drive_setpoint``): a NED
+        velocity, or a heading alone to turn on the spot."""
+        if self.position is None:
+            return
+        bearing, s = drive_setpoint(self.position, self.yaw, waypoint, speed)
+        if s > 0.0:
+            self._stick(t, VELOCITY_ONLY, s * math.cos(bearing), s * math.sin(bearing))
+        else:
+            self._stick(t, HEADING_ONLY, yaw=bearing)
+
+    def _hold_still(self, t: float) -> None:
+        """A zero stick, streamed as the native station streams it (``GroundStation.stop``): when the route is
+        driven, and when the picture has frozen. The native operator then stops streaming and its vehicle stops
+        0.5 s after the last setpoint (``vehicle.teleop.SETPOINT_TTL``); GUIDED keeps driving the last velocity for
+        3 s, so the operator lets go of its stick instead, which stops the rover as soon as any of it gets through
+        a fading link."""
+        self._stick(t, STOPPED, frame=apm.MAV_FRAME_BODY_NED)
 
     def request_rtl(self, t: float) -> None:
         """A scripted RTL (the scenario's ``rtl`` event): the operator switches the firmware to RTL."""
@@ -137,6 +208,7 @@ class FirmwareOperator:
                 self.next_retry = t + RETRY_S
                 self._command(apm.MAV_CMD_SET_MESSAGE_INTERVAL, apm.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
                               LOCAL_POSITION_INTERVAL_US)
+                self._command(apm.MAV_CMD_SET_MESSAGE_INTERVAL, apm.MAVLINK_MSG_ID_ATTITUDE, ATTITUDE_INTERVAL_US)
                 self.phase = "guided"
             return
         if phase == "guided":
@@ -157,7 +229,8 @@ class FirmwareOperator:
         fresh = self.fresh(t)
         if not fresh:
             self.cut_off = self.heading_to or self.cut_off
-            self.sent_target = None  # resend once the picture is back
+            if self.lets_go and self.mode == GUIDED and self.phase in ("driving", "resuming"):
+                self._hold_still(t)  # the picture froze: it lets go of the stick (see ``_hold_still``)
             return
         if self.mode in RETURN_MODES:
             self.cut_off = self.heading_to or self.cut_off
@@ -168,9 +241,7 @@ class FirmwareOperator:
             if self.mode == HOLD or (self.rest_since is not None and t - self.rest_since >= REST_S):
                 if phase == "rtl":
                     return  # the operator asked for this return: it leaves the rover where RTL took it
-                if self.cut_off is not None:
-                    self.losses[self.cut_off] = self.losses.get(self.cut_off, 0) + 1
-                    self.cut_off = None
+                self._count_loss()
                 if retry:
                     self.next_retry = t + RETRY_S
                     self._set_mode(GUIDED)
@@ -178,14 +249,29 @@ class FirmwareOperator:
                     self.log.append((t, "taking control back"))
                     if phase == "driving":
                         self.phase = "resuming"
+                    self._rejoin()
             return
         self.rest_since = None
         if self.mode != GUIDED:
             return
         leg = self.resume if self.phase == "resuming" else self.leg
         if self.phase == "driving" and leg.done:
+            self._hold_still(t)
             return
         self._drive(leg, t)
+
+    def _count_loss(self) -> None:
+        """The rover came back without the link: the waypoint it was driving toward counts one loss, once (it is
+        driven toward again only when the operator drives again)."""
+        if self.cut_off is not None:
+            self.losses[self.cut_off] = self.losses.get(self.cut_off, 0) + 1
+            self.cut_off = None
+        self.heading_to = None
+
+    def _rejoin(self) -> None:
+        """After a return, the resume route picked up where the native operator picks it up (``Leg.join``)."""
+        if self.rejoin and self.phase == "resuming" and self.position is not None:
+            self.resume.join(*self.position)
 
     def _drive(self, leg: Leg, t: float) -> None:
         while not leg.done:
@@ -200,39 +286,8 @@ class FirmwareOperator:
             break
         if leg.done:
             self.heading_to = None
+            self._hold_still(t)
             return
         x, y, speed = leg.points[leg.index]
         self.heading_to = (x, y)
-        aim = self._aim(leg)
-        sent = self.sent_target
-        moved = sent is None or (aim != sent and (aim == (x, y) or math.dist(aim, sent) >= CARROT_STEP_M))
-        if moved or t >= self.next_retry:
-            self.next_retry = t + 2 * RETRY_S  # a target is idempotent: resent now and then against a lost packet
-            self._goto(*aim, speed)
-
-    def _aim(self, leg: Leg) -> tuple[float, float]:
-        """Where to send the rover on its way to the leg's current waypoint: a point ``CARROT_S`` of travel at the
-        leg's speed (at least ``CARROT_MIN_M``) ahead of it on the stretch from the waypoint before, or the waypoint
-        itself when that is nearer or there is none.
-
-        GUIDED steers straight at a position target, and a person steering a rover down a tunnel keeps it on the
-        way, not on the line from wherever it stands to a waypoint 45 m off: from a rest place beside the tunnel's
-        wall (where a return leaves it, 1.4 m off the middle at the bend) that line runs along the wall and the
-        rover scrapes it all the way. Nearer at a slow leg: a door is driven slowly, and a rover left 1.4 m off the
-        line beside it (where a return came to rest) steered at a target 6 m ahead cut across the door's jamb
-        (building, seed 3, measured); a target 2 m ahead brings it onto the line before the door."""
-        x, y = leg.points[leg.index][:2]
-        if leg.index == 0 or self.position is None:
-            return x, y
-        ax, ay = leg.points[leg.index - 1][:2]
-        dx, dy = x - ax, y - ay
-        length = math.hypot(dx, dy)
-        if length < 1e-9:
-            return x, y
-        ux, uy = dx / length, dy / length
-        speed = leg.points[leg.index][2]
-        along = max(0.0, (self.position[0] - ax) * ux + (self.position[1] - ay) * uy) + max(CARROT_MIN_M,
-                                                                                           CARROT_S * speed)
-        if along >= length:
-            return x, y
-        return ax + along * ux, ay + along * uy
+        self._steer(t, (x, y), speed)

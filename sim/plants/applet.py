@@ -89,7 +89,7 @@ class AppletPlant(FirmwarePlant):
     def _make_operator(self, sc: Scenario) -> AppletOperator:
         return AppletOperator(sc.route, sc.resume_route, self.origin, sc.attempts,
                               sysid=sc.station(sc.operator_station).sysid,
-                              applet_timeout=self.rlnk.get("RLNK_TIMEOUT", self.lnk_timeout))
+                              applet_timeout=self.rlnk.get("RLNK_TIMEOUT", self.lnk_timeout), rejoin=sc.rejoin)
 
     def radio_status(self, state: LinkState, t: float) -> None:
         """The vehicle-side radio's RADIO_STATUS into the firmware's port (the radio sits on the robot: no loss)."""

@@ -72,4 +72,4 @@ class CompanionPlant(CompanionSide, FirmwarePlant):
 
     def _make_operator(self, sc: Scenario) -> CompanionOperator:
         return CompanionOperator(sc.route, sc.resume_route, self.origin, from_plan_items(sc.plan), sc.attempts,
-                                 sysid=sc.station(sc.operator_station).sysid)
+                                 sysid=sc.station(sc.operator_station).sysid, rejoin=sc.rejoin)

@@ -101,7 +101,7 @@ class FirmwarePlant(AutopilotPlant):
     def _make_operator(self, sc: Scenario) -> FirmwareOperator:
         """The scripted operator: a person flying the firmware in GUIDED from the scenario's station."""
         return FirmwareOperator(sc.route, sc.resume_route, self.origin, sc.attempts,
-                                sysid=sc.station(sc.operator_station).sysid)
+                                sysid=sc.station(sc.operator_station).sysid, rejoin=sc.rejoin)
 
     # ----- the scenario around it ----------------------------------------------------------------------------
     def station(self, spec: Station, operator: bool) -> tuple[FirmwareOperator | None, None]:

@@ -113,7 +113,8 @@ class PX4Plant(AutopilotPlant):
         if not operator:
             return None, None
         sc = self.scenario
-        self.operator = PX4Operator(sc.route, sc.resume_route, self.geo, sc.attempts, sysid=spec.sysid)
+        self.operator = PX4Operator(sc.route, sc.resume_route, self.geo, sc.attempts, sysid=spec.sysid,
+                                    rejoin=sc.rejoin)
         return self.operator, None
 
     # ----- time ----------------------------------------------------------------------------------------------

@@ -84,5 +84,5 @@ class PX4CompanionPlant(CompanionSide, PX4Plant):
             return None, None
         sc = self.scenario
         self.operator = PX4CompanionOperator(sc.route, sc.resume_route, self.geo, from_plan_items(sc.plan),
-                                             sc.attempts, sysid=spec.sysid)
+                                             sc.attempts, sysid=spec.sysid, rejoin=sc.rejoin)
         return self.operator, None

@@ -1,7 +1,7 @@
 """The scripted operator of a PX4 companion run: a person at a ground station flying a PX4 rover that has returnlink
 companion between its telemetry port and the radio (docs/architecture.md §11.2).
 
-It is the PX4 operator (``sim.px4.operator.PX4Operator``: Offboard position setpoints streamed at 10 Hz to PX4,
+It is the PX4 operator (``sim.px4.operator.PX4Operator``: Offboard setpoints streamed at 10 Hz to PX4,
 component 1) with the lease steps of the ArduPilot companion operator (``sim.firmware.companion_operator``) in
 front, taken through the same ground-station library addressed to the companion, component 191: it takes control
 (MAV_CMD_REQUEST_OPERATOR_CONTROL), uploads the scenario's return plan, and only then asks PX4 for its position
@@ -37,8 +37,8 @@ class PX4CompanionOperator(ThroughCompanion, PX4Operator):
     """The PX4 operator behind returnlink companion (see the module docstring)."""
 
     def __init__(self, route, resume_route, geo: Origin, plan: list[Item], attempts: int = 2,
-                 sysid: int = GCS_SYSID, compid: int = GCS_COMPID) -> None:
-        super().__init__(route, resume_route, geo, attempts, sysid, compid)
+                 sysid: int = GCS_SYSID, compid: int = GCS_COMPID, rejoin: bool = True) -> None:
+        super().__init__(route, resume_route, geo, attempts, sysid, compid, rejoin)
         # PX4's system id (its instance + 1) is learnt from its HEARTBEAT: the station is pointed at it then
         self.gs = GroundStation(sysid, compid, target=0, target_comp=COMPANION_COMPID)
         self.plan = plan
@@ -76,10 +76,8 @@ class PX4CompanionOperator(ThroughCompanion, PX4Operator):
         gs = self.gs
         mine = st.owner == gs.sysid
         if st.state == _AWAITING_CLAIM and mine:
-            if self.fresh(t) and (self.pending is None or self.pending.done):
-                self.pending = gs.claim(-1)
-                self.claims += 1
-                self.log.append((t, f"claiming [{st.epoch},{st.current}]"))
+            if self.fresh(t):
+                self.claim(t, st)
             return
         if st.state == _TELEOP and mine:
             if not self.returned and self.phase in _DRIVING and self.armed and self.mode == HOLD:
@@ -94,6 +92,7 @@ class PX4CompanionOperator(ThroughCompanion, PX4Operator):
                     self._set_mode(OFFBOARD)
                 return
             self.held_since = None
+            self.drives_home()
             self._step(t)
             if self.phase == "offboard":
                 self.returned = False  # taken back (``_after_failsafe``): from here the operator drives again
@@ -104,4 +103,4 @@ class PX4CompanionOperator(ThroughCompanion, PX4Operator):
         self.cut_off = self.heading_to or self.cut_off
         self.sent_target = None
         if self.position is not None:
-            self.setpoint = self.position
+            self.setpoint = ("position", *self.position)
