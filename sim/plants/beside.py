@@ -20,12 +20,23 @@ from sim.scenario import Event
 from vehicle.companion import router
 from vehicle.companion.app import Companion
 from vehicle.lease import Holder
-from vehicle.params import Params
+from vehicle.params import Params, load_defaults
 
 # what a forwarded frame needs to be audited: it changes the robot's state under a lease
 AUDITED = frozenset((router.Authority.LEASE, router.Authority.MODE))
 COMPID_AT = {0xFD: 6, 0xFE: 4}  # MAVLink 2 / 1 start byte -> the byte that holds the sender's component id
 AIR_RADIO = "radio"  # the source the vehicle-side radio's frames come from, on the companion's ground side
+
+
+def companion_params(scenario_params: dict[str, float], body_radius: float) -> Params:
+    """The companion's returnlink parameters in a run: the defaults, RTL_BODY_R the robot's footprint (as its
+    integrator would set a real one's, and as the native vehicle's is set: ``sim.driver``), then the scenario's own.
+    With the footprint the return keeps the body off what the rover's range sensors see (``vehicle.standoff``)."""
+    params = load_defaults()
+    params.set("RTL_BODY_R", body_radius)
+    for k, v in scenario_params.items():
+        params.set(k, v)
+    return params
 
 
 class CompanionSide:
@@ -121,6 +132,16 @@ class CompanionSide:
         ox, oy = self.frame_offset
         return ox + p.x, oy + p.y
 
+    def range_words(self) -> str:
+        """What the companion heard of the rover's range data, for the summary."""
+        r = self.companion.driver.ranges
+        if r.first_heard is None:
+            return "range data: none heard (the return kept no standoff)"
+        counts = r.counts
+        dropped = {k: n for k, n in sorted(counts.items()) if k not in ("messages", "beams")}
+        return (f"range data: {counts.get('beams', 0)} beams in {counts.get('messages', 0)} messages "
+                f"({r.describe()}), dropped {dropped or 'none'}")
+
     # ----- the figures -----------------------------------------------------------------------------------------
     def figures(self, run) -> dict:
         """Every figure by the native rules, from the companion's own lease record, and the autopilot's version
@@ -143,7 +164,8 @@ class CompanionSide:
         extra = [f"  {name.format(version=m['firmware'])} (booted in {self.link.boot_s:.1f} simulated s before "
                  f"scenario time 0), returnlink companion on its {where}",
                  f"  the companion forwarded {c['forwarded']} ground frames to {to}, refused {c['refused']}, "
-                 f"relayed {c['relayed']} of {its} to the ground; keepalives {self.companion.driver.keepalives}"]
+                 f"relayed {c['relayed']} of {its} to the ground; keepalives {self.companion.driver.keepalives}",
+                 f"  {self.range_words()}"]
         modes = [f"  {modes_title}:"] + [f"    {e['t']:7.2f} s  {e['mode']}" for e in m["firmware_modes"]]
         notes = [f"  note: {n}" for n in run.notes]
         return "\n".join([lines[0], *extra, *lines[1:-1], *modes, *notes, lines[-1]])
