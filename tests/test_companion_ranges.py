@@ -14,6 +14,7 @@ from pymavlink.dialects.v20 import ardupilotmega as apm
 from tests.companion_rig import FakeAutopilot, Rig
 from vehicle.companion.autopilot import AutopilotDriver
 from vehicle.companion.ranges import QUIET_S, UINT16_MAX, Beam, RangeSensors, distance_beam, obstacle_beams
+from vehicle.companion.setup import range_params, range_report
 from vehicle.standoff import MAX_AGE, MEMORY, SPARSE, Sweep, remember
 
 OBSTACLE_AVOIDANCE = apm.MAV_COMP_ID_OBSTACLE_AVOIDANCE
@@ -237,3 +238,15 @@ def test_a_rangefinder_heard_is_said_once_and_fed_to_the_standoff():
     assert np.hypot(v.control.sweep.x - v.estimator.pose.x, v.control.sweep.y).min() == pytest.approx(1.5, abs=0.05)
     relayed = [m for m in rig.ground_messages("DISTANCE_SENSOR")]
     assert 0 < len(relayed) <= QUIET_S + 4  # once a second to the ground, not the 10 Hz the return reads
+
+
+# ----- --check -------------------------------------------------------------------------------------------------------
+def test_check_names_the_rangefinders_that_give_the_return_its_standoff_and_the_ones_that_do_not():
+    assert {"RNGFND1_TYPE", "RNGFND1_ORIENT", "RNGFND6_ORIENT", "PRX1_TYPE"} <= set(range_params(3))
+    text = range_report({"RNGFND1_TYPE": 100, "RNGFND1_ORIENT": 0, "RNGFND2_TYPE": 10, "RNGFND2_ORIENT": 25}, 3)
+    assert "RNGFND1_ORIENT 0: facing forward" in text and "RNGFND2_ORIENT 25: not along the ground" in text
+    assert "MAVn_EXTRA3" in text and "keeps no standoff" not in text
+    assert "keeps no standoff" in range_report({"RNGFND1_TYPE": 0, "PRX1_TYPE": 0}, 3)
+    assert "keeps no standoff" not in range_report({"PRX1_TYPE": 2}, 3)
+    assert "SENS_EN_SF1XX 4" in range_report({"SENS_EN_SF1XX": 4}, 12)
+    assert "keeps no standoff" in range_report({}, 12)
