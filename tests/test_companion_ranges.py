@@ -250,3 +250,67 @@ def test_check_names_the_rangefinders_that_give_the_return_its_standoff_and_the_
     assert "keeps no standoff" not in range_report({"PRX1_TYPE": 2}, 3)
     assert "SENS_EN_SF1XX 4" in range_report({"SENS_EN_SF1XX": 4}, 12)
     assert "keeps no standoff" in range_report({}, 12)
+
+
+# ----- the simulated rover's sensors, as the companion hears them --------------------------------------------------
+def walled():
+    """A world with a wall 2.75 m ahead of a rover at the origin facing north (its face: 3 m less half its 0.5 m)."""
+    from sim.robots import Rover
+    from sim.world import Wall, World
+
+    world = World((Wall(((3.0, -5.0), (3.0, 5.0)), 0.5, 10.0),))
+    return world, Rover(world, 0.0, 0.0, 0.0, np.random.default_rng(0))
+
+
+def test_the_firmwares_rangefinders_see_the_wall_ahead_and_nothing_behind():
+    import json
+
+    from sim.firmware import rangefinders as rf
+    from sim.firmware.bridge import state_reply
+
+    world, _ = walled()
+    ranges = rf.Rangefinders(world, np.random.default_rng(1)).measure(0.0, 0.0, 0.0, 0.0)
+    assert ranges[0] == pytest.approx(2.75, abs=0.1) and ranges[rf.BEARINGS.index(math.pi)] == rf.REACH + 1.0
+    reply = state_reply(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, ranges)
+    assert f'"rng_1":{ranges[0]:.3f}'.encode() in reply  # (the firmware finds each value right after its key)
+    assert json.loads(reply)["rng_6"] == pytest.approx(ranges[5], abs=1e-3)
+    assert b"rng_" not in state_reply(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # a rover without: as before
+    p = rf.params()
+    assert [p[f"RNGFND{n}_ORIENT"] for n in range(1, 7)] == list(rf.ORIENT)
+    assert all(p[f"RNGFND{n}_TYPE"] == rf.SITL_TYPE for n in range(1, 7))
+
+
+def custom_copy(m):
+    """``m`` with its orientation CUSTOM, as PX4 reports a sensor that is not forward, back, left or right."""
+    return apm.MAVLink_distance_sensor_message(m.time_boot_ms, m.min_distance, m.max_distance, m.current_distance,
+                                               m.type, m.id, apm.MAV_SENSOR_ROTATION_CUSTOM, m.covariance,
+                                               m.horizontal_fov, m.vertical_fov, m.quaternion, m.signal_quality)
+
+
+def test_px4s_distance_sensors_are_read_back_as_the_same_beams():
+    from sim.firmware import rangefinders as rf
+
+    world, _ = walled()
+    ranges = rf.Rangefinders(world, np.random.default_rng(1)).measure(0.0, 0.0, 0.0, 0.0)
+    sent = rf.distance_sensors(ranges, 1000)
+    beams = [distance_beam(framed(m)) for m in sent]
+    # PX4 reports the diagonals as CUSTOM with the quaternion it was given: the companion reads them the same
+    custom = [distance_beam(framed(custom_copy(m))) for m in sent]
+    assert all(abs(math.remainder(c.bearing - b.bearing, math.tau)) < 1e-6 for c, b in zip(custom, beams, strict=True))
+    assert [round(math.degrees(b.bearing)) % 360 for b in beams] == [round(math.degrees(a)) % 360 for a in rf.BEARINGS]
+    assert beams[0].range == pytest.approx(ranges[0], abs=0.01) and beams[3].range == math.inf
+
+
+def test_the_lidar_drivers_sweep_is_the_native_sensors_sweep_to_the_companion():
+    from sim.plants.lidar import COMPID, Lidar
+
+    world, robot = walled()
+    lidar = Lidar(world, robot, np.random.default_rng(2))
+    parser = apm.MAVLink(None, 0, 0)
+    m = parser.parse_buffer(lidar.frame(0.0, 1))[0]
+    assert (m.get_srcSystem(), m.get_srcComponent()) == (1, COMPID) and not lidar.due(0.1) and lidar.due(0.5)
+    r = RangeSensors()
+    r.heard(m, 0.0, None)
+    s = r.scan(0.0)
+    assert len(s.ranges) == 72 and s.max_range == pytest.approx(8.0)
+    assert s.ranges[0] == pytest.approx(2.75, abs=0.1) and s.ranges[36] == math.inf  # ahead the wall, behind nothing

@@ -7,6 +7,8 @@ the radio, what the radio delivers goes to it, and what it forwards reaches the 
 of the router (a forwarded frame that drives the robot or changes its mode must come from the owner while the lease
 last announced is an operator's). The run keeps the native vehicle's lease record, so every §7 figure is computed
 by the native rules (``sim.metrics.lease_figures``), with the autopilot's version and mode timeline beside them.
+The rover carries the native rover's lidar, whose driver on the vehicle sends the companion OBSTACLE_DISTANCE
+(``sim.plants.lidar``), beside the rangefinders the autopilot reports.
 """
 
 from __future__ import annotations
@@ -14,8 +16,9 @@ from __future__ import annotations
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from link.proxy import RadioReport
-from link.radio import LinkState
+from link.radio import LinkState, subsystem_rng
 from sim import metrics
+from sim.plants.lidar import Lidar
 from sim.scenario import Event
 from vehicle.companion import router
 from vehicle.companion.app import Companion
@@ -59,6 +62,8 @@ class CompanionSide:
         self.forwarded = 0  # ground frames the companion passed to the autopilot
         self.stale = 0  # of those, the ones the run's audit of the router found outside the operator's lease
         self.air_radio = RadioReport()  # the vehicle-side telemetry radio: its own sequence numbers
+        # the native rover's lidar, through its driver on the vehicle (OBSTACLE_DISTANCE, issue 41)
+        self.lidar = Lidar(self.world, self.robot, subsystem_rng(self.seed, "lidar"))
 
     @property
     def vehicle(self):
@@ -83,6 +88,9 @@ class CompanionSide:
         """The autopilot's frames to the companion; what the companion sends the ground, through the radio."""
         for data in self.link.drain(t):
             self.companion.from_autopilot(data, t)
+        sysid = self.companion.driver.seen.sysid
+        if sysid is not None and self.lidar.due(t):
+            self.companion.from_autopilot(self.lidar.frame(t, sysid), t)
         out = list(self.to_ground)
         self.to_ground.clear()
         return out

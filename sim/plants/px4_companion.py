@@ -62,6 +62,7 @@ class PX4CompanionPlant(CompanionSide, PX4Plant):
 
     policies = (COMPANION_POLICY,)
     FAILURE = PX4Error
+    rangefinders = True  # the rover's six, through PX4 (DISTANCE_SENSOR on its simulator link): issue 41
     WORDS = ("{version}", "telemetry link", "PX4", "PX4's", "PX4 nav states")
 
     def __init__(self, scenario: Scenario, kind: str = PX4_VEHICLE, seed: int | None = None,
