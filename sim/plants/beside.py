@@ -22,6 +22,7 @@ from sim.plants.lidar import Lidar
 from sim.scenario import Event
 from vehicle.companion import router
 from vehicle.companion.app import Companion
+from vehicle.companion.ranges import KINDS as RANGE_KINDS
 from vehicle.lease import Holder
 from vehicle.params import Params, load_defaults
 
@@ -146,7 +147,7 @@ class CompanionSide:
         if r.first_heard is None:
             return "range data: none heard (the return kept no standoff)"
         counts = r.counts
-        dropped = {k: n for k, n in sorted(counts.items()) if k not in ("messages", "beams")}
+        dropped = {k: n for k, n in sorted(counts.items()) if k not in ("messages", "beams", *RANGE_KINDS)}
         return (f"range data: {counts.get('beams', 0)} beams in {counts.get('messages', 0)} messages "
                 f"({r.describe()}), dropped {dropped or 'none'}")
 

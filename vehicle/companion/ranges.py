@@ -174,7 +174,7 @@ class RangeSensors:
 
     def __init__(self) -> None:
         self.waiting: list[tuple[float, Beam]] = []  # (arrival, beam) not yet in a scan
-        self.counts: dict[str, int] = {}  # "messages", "beams", "stale", and each reason a message was dropped
+        self.counts: dict[str, int] = {}  # "messages" (and per kind), "beams", "stale", each reason one was dropped
         self.sources: set[tuple[int, int, str]] = set()  # (sysid, compid, message) that gave usable readings
         self.first_heard: float | None = None
 
@@ -190,6 +190,7 @@ class RangeSensors:
             return
         beams = [got] if isinstance(got, Beam) else got
         self._count("messages")
+        self._count(kind)
         self._count("beams", len(beams))
         self.sources.add((m.get_srcSystem(), m.get_srcComponent(), kind))
         if self.first_heard is None:
