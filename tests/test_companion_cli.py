@@ -54,13 +54,13 @@ class FakeAutopilotServer:
 
     def _serve(self) -> None:
         self.server.settimeout(0.2)
+        t0 = time.monotonic()  # one clock for every connection: the stand-in's schedule (heartbeat, reports) runs on
         while not self.stop.is_set():
             try:
                 conn, _ = self.server.accept()
             except OSError:
                 continue
             conn.settimeout(0.02)
-            t0 = time.monotonic()
             with conn:
                 while not self.stop.is_set():
                     t = time.monotonic() - t0
@@ -151,6 +151,7 @@ def test_check_lists_what_differs_and_configure_sets_it_saying_so(capsys):
         out = capsys.readouterr().out
         assert code == 1
         assert [ln.split()[0] for ln in out.splitlines() if "DIFFERS" in ln] == ["FS_GCS_ENABLE", "MAV_OPTIONS"]
+        assert "RNGFNDn_TYPE" in out and "the return keeps no standoff" in out  # none set up: said, not failed
         assert ap.params["FS_GCS_ENABLE"] == 0.0  # --check never changes anything
         code = main(["companion", "--autopilot", f"tcp:127.0.0.1:{server.port}", "--configure", "--wait", "5"])
         out = capsys.readouterr().out

@@ -19,13 +19,21 @@ from vehicle.estimator import Estimator
 from vehicle.io import Readings, RobotDriver
 from vehicle.lease import ExecutionLease, Holder, Verdict
 from vehicle.linkmap import LinkMap, MapConfig
-from vehicle.standoff import Sweep, sweep
+from vehicle.standoff import Sweep, remember, sweep
 from vehicle.teleop import Setpoint
 from vehicle.trail import Crumb, Trail, TrailConfig
 
 OUTBOUND_GAIN = 0.02  # per tick: how fast the remembered outbound speed follows the speed driven under teleop
 PACE_GAIN = 0.2  # per tick: the ground speed a crumb carries, smoothed over a few ticks (odometry noise, foot slip)
 OUTBOUND_MIN_STICK = 0.2  # m/s: slower setpoints (creeping, turning in place) do not teach the outbound speed
+
+
+def _beams(scan) -> int:
+    """How many beams a driver's scan has (0 when it is not a sequence: ``sweep`` drops such a scan anyway)."""
+    try:
+        return len(scan.bearings)
+    except TypeError:
+        return 0
 
 
 class Ticking(Onboard, Protocol):
@@ -85,7 +93,8 @@ class ControlLoop:
         self.linkmap.at(t, p.x, p.y)
         if r.scan is not None:
             self.free.scan(p.x, p.y, p.yaw, r.scan)
-            self.sweep = sweep(t, p.x, p.y, p.yaw, r.scan)
+            # (a few rangefinders' beams are kept for a moment with those before them: ``remember``)
+            self.sweep = remember(self.sweep, sweep(t, p.x, p.y, p.yaw, r.scan), _beams(r.scan))
         book = v.book
         good = self.link_is_good = v.link_good(t)
         if v.contingency is not None:

@@ -19,6 +19,11 @@ door barely wider than the robot) an arc that touches nothing is driven at the s
 stalled by its own margin; where none touches nothing, the robot stops and may turn. A robot that never gets near a
 wall drives exactly the follower's command, and a robot without the sensor, or with RTL_BODY_R 0, always does.
 
+A sweep of a handful of beams (fewer than SPARSE: a rover's rangefinders, which a companion hears as DISTANCE_SENSOR,
+``vehicle.companion.ranges``) sees a wall only where a beam points. Its returns are kept with those of the sweeps
+before it for MEMORY s (``remember``), each where it was seen in the estimated frame, so the door jamb the 45-degree
+beam saw a moment ago still counts as the body passes it. A full sweep says all there is and replaces the last.
+
 Pure: functions of the sweep, the poses and the command; the control loop keeps the sweep between ticks.
 """
 
@@ -38,14 +43,18 @@ NEAR = 2.0  # m: returns further than this from the robot when swept are not kep
 MAX_AGE = 1.5  # s: a sweep older than this (three at the simulated 2 Hz: the sensor has stopped) says nothing of now
 TURNS = np.array([0.0, 0.15, -0.15, 0.3, -0.3, 0.5, -0.5, 0.75, -0.75, 1.0, -1.0])  # rad/s tried around the follower's
 PACES = (1.0, 0.5, 0.25)  # fractions of the follower's speed tried, in order
+SPARSE = 24  # beams: a sweep of fewer is a handful of rangefinders, remembered (``remember``); a lidar has more
+MEMORY = 1.0  # s a sparse sweep's returns are kept: about a metre of driving, in which the estimate moves by mm
 
 
 class Sweep(NamedTuple):
-    """The returns of one sweep within NEAR, as points in the estimated frame of the moment ``t`` it was taken."""
+    """The returns of one sweep within NEAR, as points in the estimated frame of the moment ``t`` it was taken
+    (``born``: each point's own time, where sweeps of a few beams are kept together; None: all at ``t``)."""
 
     x: np.ndarray
     y: np.ndarray
     t: float
+    born: np.ndarray | None = None
 
 
 def sweep(t: float, x: float, y: float, yaw: float, scan: Scan) -> Sweep | None:
@@ -62,6 +71,19 @@ def sweep(t: float, x: float, y: float, yaw: float, scan: Scan) -> Sweep | None:
     hit = np.isfinite(b) & np.isfinite(r) & (r >= 0.0) & (r < min(reach, NEAR))
     a = yaw + b[hit]
     return Sweep(x + r[hit] * np.cos(a), y + r[hit] * np.sin(a), t)
+
+
+def remember(kept: Sweep | None, new: Sweep | None, beams: int) -> Sweep | None:
+    """The sweep a return keeps off after ``new``, a sweep of ``beams`` beams: ``new`` itself if it is a full one
+    (SPARSE beams or more) or none, else ``new`` with the points of ``kept`` that are at most MEMORY older."""
+    if new is None or beams >= SPARSE:
+        return new
+    if kept is None or len(kept.x) == 0:
+        return new._replace(born=np.full(len(new.x), new.t))
+    born = kept.born if kept.born is not None else np.full(len(kept.x), kept.t)
+    young = (new.t - born <= MEMORY) & (born <= new.t)
+    return Sweep(np.concatenate([kept.x[young], new.x]), np.concatenate([kept.y[young], new.y]), new.t,
+                 np.concatenate([born[young], np.full(len(new.x), new.t)]))
 
 
 def _arcs(speed: float, turns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -127,10 +127,18 @@ _REPLY = ('\n{{"timestamp":{:.6f},"imu":{{"gyro":[{:.6f},{:.6f},{:.6f}],"accel_b
           '"position":[{:.4f},{:.4f},{:.4f}],"velocity":[{:.4f},{:.4f},{:.4f}],"attitude":[{:.6f},{:.6f},{:.6f}]}}\n')
 
 
+# the same with the six rangefinders' distances (m), which the backend reads as "rng_1" ... "rng_6"
+_REPLY_RNG = _REPLY[:-3] + ''.join(f',"rng_{n}":{{:.3f}}' for n in range(1, 7)) + '}}\n'
+
+
 def state_reply(t: float, x: float, y: float, yaw: float, vx: float, vy: float, speed: float, accel: float,
-                yaw_rate: float) -> bytes:
+                yaw_rate: float, ranges: tuple[float, ...] | None = None) -> bytes:
     """The JSON answer for a ground vehicle on flat ground: position and velocity NED (x north, y east), attitude
     [roll, pitch, yaw], gyro in body FRD, and specific force in body FRD — forward acceleration, the centripetal
-    ``speed * yaw_rate`` to the side, and -g on z (the ground holds it up)."""
-    return _REPLY.format(t, 0.0, 0.0, yaw_rate, accel, speed * yaw_rate, -GRAVITY, x, y, 0.0, vx, vy, 0.0,
-                         0.0, 0.0, yaw).encode()
+    ``speed * yaw_rate`` to the side, and -g on z (the ground holds it up). ``ranges``: the six rangefinders'
+    distances (``sim.firmware.rangefinders``), or None for a rover without them (no ``rng_N`` keys)."""
+    if ranges is None:
+        return _REPLY.format(t, 0.0, 0.0, yaw_rate, accel, speed * yaw_rate, -GRAVITY, x, y, 0.0, vx, vy, 0.0,
+                             0.0, 0.0, yaw).encode()
+    return _REPLY_RNG.format(t, 0.0, 0.0, yaw_rate, accel, speed * yaw_rate, -GRAVITY, x, y, 0.0, vx, vy, 0.0,
+                             0.0, 0.0, yaw, *ranges).encode()

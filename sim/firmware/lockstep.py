@@ -1,6 +1,7 @@
 """The firmware and its physics in lockstep: one ArduPilot SITL process, its JSON bridge and its MAVLink port.
 
-``Lockstep`` starts the firmware (``process``), answers its servo packets by stepping a pymunk robot (``bridge``),
+``Lockstep`` starts the firmware (``process``), answers its servo packets by stepping a pymunk robot (``bridge``;
+with the rover's rangefinders in each answer when it has them, ``rangefinders``),
 reads everything it says on SERIAL0 into a ``Tap`` (the truth about it: modes, arming, estimate, version), lets a
 caller send it MAVLink, and stops it. What happens around it, a scenario's radio and operator (``run``) or a ground
 station of your own (``serve``), is the caller's; this module knows nothing of either.
@@ -19,6 +20,7 @@ from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from sim.firmware.bridge import SKID_FUNCTIONS, FrameRules, FrameVerdict, ServoMap, parse_servo, state_reply
 from sim.firmware.process import FirmwareError, FirmwareProcess, claim_instance
+from sim.firmware.rangefinders import Rangefinders
 from sim.robots import Robot
 from sim.world import World
 
@@ -99,9 +101,12 @@ class Lockstep:
     time on; ``drain`` reads what it said, ``send`` talks to it; ``close`` stops it (always, in a ``finally``)."""
 
     def __init__(self, world: World, robot: Robot, firmware: Path, params: dict[str, float],
-                 speedup: float = SPEEDUP, log_path: Path | None = None, scripts: tuple[Path, ...] = ()) -> None:
+                 speedup: float = SPEEDUP, log_path: Path | None = None, scripts: tuple[Path, ...] = (),
+                 rangefinders: Rangefinders | None = None) -> None:
         """``scripts``: Lua files for the firmware's ``scripts/`` folder (its working directory's, as the SD card's
-        ``APM/scripts/`` on a flight controller); they run when the parameters set SCR_ENABLE 1."""
+        ``APM/scripts/`` on a flight controller); they run when the parameters set SCR_ENABLE 1. ``rangefinders``:
+        the rover's, measured from the world at their own pace into each answer (``params`` must give the firmware
+        them: ``sim.firmware.rangefinders.params``); None, a rover without."""
         self.world, self.robot = world, robot
         self.scripts = tuple(Path(s) for s in scripts)
         self.firmware = Path(firmware)
@@ -120,8 +125,10 @@ class Lockstep:
         self.boot_s = 0.0  # simulated seconds the firmware took to boot
         self._next_tick = DT
         self._sent: bytes | None = None
+        self.rangefinders = rangefinders
         x0, y0, yaw0 = robot.pose
-        self._next = state_reply(0.0, x0, y0, yaw0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        ranges = rangefinders.measure(0.0, x0, y0, yaw0) if rangefinders is not None else None
+        self._next = state_reply(0.0, x0, y0, yaw0, 0.0, 0.0, 0.0, 0.0, 0.0, ranges)
 
     def start(self) -> None:
         instance, self.json_sock = claim_instance()
@@ -192,7 +199,12 @@ class Lockstep:
         self.t_fw += dt
         x, y, yaw = r.pose
         v = r.body.velocity
-        self._next = state_reply(self.t_fw, x, y, yaw, v.x, v.y, r.true_speed, r.accel, r.body.angular_velocity)
+        ranges = None
+        rf = self.rangefinders
+        if rf is not None:
+            ranges = rf.measure(self.t_fw, x, y, yaw) if rf.due(self.t_fw) else rf.last
+        self._next = state_reply(self.t_fw, x, y, yaw, v.x, v.y, r.true_speed, r.accel, r.body.angular_velocity,
+                                 ranges)
 
     def frames(self, until: float, at_tick: Callable[[float], None]) -> None:
         """Answer frames until the physics reaches ``until`` (firmware time), calling ``at_tick(t_fw)`` whenever

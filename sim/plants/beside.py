@@ -7,6 +7,8 @@ the radio, what the radio delivers goes to it, and what it forwards reaches the 
 of the router (a forwarded frame that drives the robot or changes its mode must come from the owner while the lease
 last announced is an operator's). The run keeps the native vehicle's lease record, so every §7 figure is computed
 by the native rules (``sim.metrics.lease_figures``), with the autopilot's version and mode timeline beside them.
+The rover carries the native rover's lidar, whose driver on the vehicle sends the companion OBSTACLE_DISTANCE
+(``sim.plants.lidar``), beside the rangefinders the autopilot reports.
 """
 
 from __future__ import annotations
@@ -14,18 +16,31 @@ from __future__ import annotations
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from link.proxy import RadioReport
-from link.radio import LinkState
+from link.radio import LinkState, subsystem_rng
 from sim import metrics
+from sim.plants.lidar import Lidar
 from sim.scenario import Event
 from vehicle.companion import router
 from vehicle.companion.app import Companion
+from vehicle.companion.ranges import KINDS as RANGE_KINDS
 from vehicle.lease import Holder
-from vehicle.params import Params
+from vehicle.params import Params, load_defaults
 
 # what a forwarded frame needs to be audited: it changes the robot's state under a lease
 AUDITED = frozenset((router.Authority.LEASE, router.Authority.MODE))
 COMPID_AT = {0xFD: 6, 0xFE: 4}  # MAVLink 2 / 1 start byte -> the byte that holds the sender's component id
 AIR_RADIO = "radio"  # the source the vehicle-side radio's frames come from, on the companion's ground side
+
+
+def companion_params(scenario_params: dict[str, float], body_radius: float) -> Params:
+    """The companion's returnlink parameters in a run: the defaults, RTL_BODY_R the robot's footprint (as its
+    integrator would set a real one's, and as the native vehicle's is set: ``sim.driver``), then the scenario's own.
+    With the footprint the return keeps the body off what the rover's range sensors see (``vehicle.standoff``)."""
+    params = load_defaults()
+    params.set("RTL_BODY_R", body_radius)
+    for k, v in scenario_params.items():
+        params.set(k, v)
+    return params
 
 
 class CompanionSide:
@@ -48,6 +63,8 @@ class CompanionSide:
         self.forwarded = 0  # ground frames the companion passed to the autopilot
         self.stale = 0  # of those, the ones the run's audit of the router found outside the operator's lease
         self.air_radio = RadioReport()  # the vehicle-side telemetry radio: its own sequence numbers
+        # the native rover's lidar, through its driver on the vehicle (OBSTACLE_DISTANCE, issue 41)
+        self.lidar = Lidar(self.world, self.robot, subsystem_rng(self.seed, "lidar"))
 
     @property
     def vehicle(self):
@@ -72,6 +89,9 @@ class CompanionSide:
         """The autopilot's frames to the companion; what the companion sends the ground, through the radio."""
         for data in self.link.drain(t):
             self.companion.from_autopilot(data, t)
+        sysid = self.companion.driver.seen.sysid
+        if sysid is not None and self.lidar.due(t):
+            self.companion.from_autopilot(self.lidar.frame(t, sysid), t)
         out = list(self.to_ground)
         self.to_ground.clear()
         return out
@@ -121,6 +141,16 @@ class CompanionSide:
         ox, oy = self.frame_offset
         return ox + p.x, oy + p.y
 
+    def range_words(self) -> str:
+        """What the companion heard of the rover's range data, for the summary."""
+        r = self.companion.driver.ranges
+        if r.first_heard is None:
+            return "range data: none heard (the return kept no standoff)"
+        counts = r.counts
+        dropped = {k: n for k, n in sorted(counts.items()) if k not in ("messages", "beams", *RANGE_KINDS)}
+        return (f"range data: {counts.get('beams', 0)} beams in {counts.get('messages', 0)} messages "
+                f"({r.describe()}), dropped {dropped or 'none'}")
+
     # ----- the figures -----------------------------------------------------------------------------------------
     def figures(self, run) -> dict:
         """Every figure by the native rules, from the companion's own lease record, and the autopilot's version
@@ -143,7 +173,8 @@ class CompanionSide:
         extra = [f"  {name.format(version=m['firmware'])} (booted in {self.link.boot_s:.1f} simulated s before "
                  f"scenario time 0), returnlink companion on its {where}",
                  f"  the companion forwarded {c['forwarded']} ground frames to {to}, refused {c['refused']}, "
-                 f"relayed {c['relayed']} of {its} to the ground; keepalives {self.companion.driver.keepalives}"]
+                 f"relayed {c['relayed']} of {its} to the ground; keepalives {self.companion.driver.keepalives}",
+                 f"  {self.range_words()}"]
         modes = [f"  {modes_title}:"] + [f"    {e['t']:7.2f} s  {e['mode']}" for e in m["firmware_modes"]]
         notes = [f"  note: {n}" for n in run.notes]
         return "\n".join([lines[0], *extra, *lines[1:-1], *modes, *notes, lines[-1]])

@@ -43,11 +43,11 @@ from gcs.plans import from_plan_items
 from sim.firmware.companion_operator import CompanionOperator
 from sim.firmware.lockstep import SPEEDUP
 from sim.firmware.process import FirmwareError
-from sim.plants.beside import CompanionSide
+from sim.plants.beside import CompanionSide, companion_params
 from sim.plants.firmware import FirmwarePlant
 from sim.policies import COMPANION_POLICY, FIRMWARE_VEHICLE
 from sim.scenario import Scenario
-from vehicle.params import Params, load_defaults
+from vehicle.params import Params
 
 
 class CompanionPlant(CompanionSide, FirmwarePlant):
@@ -65,9 +65,7 @@ class CompanionPlant(CompanionSide, FirmwarePlant):
                  speedup: float = SPEEDUP, params: Params | None = None, **companion_options) -> None:
         super().__init__(scenario, kind, seed, policy, firmware, log_path, speedup)
         if params is None:
-            params = load_defaults()
-            for k, v in scenario.params.items():
-                params.set(k, v)
+            params = companion_params(scenario.params, self.robot.shape.radius)
         self._init_companion(params, "the ArduPilot firmware", companion_options)
 
     def _make_operator(self, sc: Scenario) -> CompanionOperator:

@@ -28,8 +28,11 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from link.radio import subsystem_rng
+from sim.firmware import rangefinders
 from sim.firmware.lockstep import MODE_NAMES, SKID_PARAMS, SPEEDUP, Lockstep
 from sim.firmware.operator import FirmwareOperator
+from sim.firmware.rangefinders import Rangefinders
 from sim.plants.autopilot import AutopilotPlant
 from sim.policies import (
     APPLET_POLICY,
@@ -61,7 +64,10 @@ def firmware_params(policy: str, lnk_timeout: float, max_speed: float,
     - WP_RADIUS 1 m: a GUIDED position target counts as reached where the scripted operator moves on;
     - skid steering (SERVO1_FUNCTION 73, SERVO3_FUNCTION 74): the scenario's rover is a differential drive that
       turns on the spot, as the native vehicle's is, so only the autopilot differs between the two (as a car, the
-      firmware had to drive forward to turn round and wedged itself in the 3.6 m culvert).
+      firmware had to drive forward to turn round and wedged itself in the 3.6 m culvert);
+    - for the companion, the rover's six rangefinders (``sim.firmware.rangefinders``: RNGFNDn_TYPE 100, the
+      SITL's, with their orientations and limits), which the firmware reports as DISTANCE_SENSOR and the companion
+      keeps its return off (docs/architecture.md §11.4).
     For the companion the GCS failsafe is its backstop, not the link-loss policy: its keepalive is what the firmware
     hears, so FS_GCS_TIMEOUT is what ``returnlink companion --check`` asks for (2..5 s), and every other parameter
     on that list is set to the value ``--configure`` would set (``vehicle.companion.setup.NEEDS``), so the run
@@ -72,6 +78,7 @@ def firmware_params(policy: str, lnk_timeout: float, max_speed: float,
     if max_accel is not None:
         params["ATC_ACCEL_MAX"] = round(max_accel, 3)
     if policy == COMPANION_POLICY:
+        params |= rangefinders.params()
         for need in NEEDS:
             value = params.get(need.name, 0.0)  # ArduPilot's default of the others is 0
             params[need.name] = value if need.ok(value) else need.fix(value)
@@ -94,9 +101,13 @@ class FirmwarePlant(AutopilotPlant):
         """``speedup``: the firmware's own pace; lockstep runs leave the pace to the bridge (``SPEEDUP``), a
         server in real time asks for 1."""
         self._set_scene(scenario, kind, seed, policy, firmware, "firmware binary")
+        # the companion's rover carries rangefinders, which it hears through the firmware (issue 41); the
+        # firmware's own failsafes use none, and their runs stay as they were measured
+        rangefinders = (Rangefinders(self.world, subsystem_rng(self.seed, "rangefinders"))
+                        if policy == COMPANION_POLICY else None)
         self.link = Lockstep(self.world, self.robot, firmware,
                              firmware_params(policy, self.lnk_timeout, self.robot.max_speed,
-                                             self.robot.max_accel), speedup, log_path)
+                                             self.robot.max_accel), speedup, log_path, rangefinders=rangefinders)
 
     def _make_operator(self, sc: Scenario) -> FirmwareOperator:
         """The scripted operator: a person flying the firmware in GUIDED from the scenario's station."""

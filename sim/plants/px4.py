@@ -30,6 +30,8 @@ import math
 from pathlib import Path
 
 from link.mission import Origin
+from link.radio import subsystem_rng
+from sim.firmware.rangefinders import Rangefinders
 from sim.plants.autopilot import AutopilotPlant
 from sim.policies import PX4_FAILSAFE_POLICIES, PX4_VEHICLE
 from sim.px4.lockstep import HOLD, NAV_STATES, OFFBOARD, RETURN, PX4Lockstep, nav_state_name
@@ -83,6 +85,7 @@ class PX4Plant(AutopilotPlant):
     autopilot = "PX4"
     mode_names = NAV_STATES
     return_modes = RETURN_MODES
+    rangefinders = False  # PX4's own failsafes use none (the companion's rover has them: sim.plants.px4_companion)
     driving_mode = OFFBOARD
     home_modes = (RETURN,)
 
@@ -100,6 +103,8 @@ class PX4Plant(AutopilotPlant):
         # the figures measure the reaction from the timeout PX4 was given (a whole number of seconds)
         self.lnk_timeout = float(self.params["COM_DL_LOSS_T"])
         options = {} if accept_timeout_s is None else {"accept_timeout_s": accept_timeout_s}
+        if self.rangefinders:
+            options["rangefinders"] = Rangefinders(self.world, subsystem_rng(self.seed, "rangefinders"))
         self.link = PX4Lockstep(self.world, self.robot, px4, self.params, self.geo, self.seed, log_path, **options)
 
     @staticmethod

@@ -27,14 +27,14 @@ from __future__ import annotations
 from pathlib import Path
 
 from gcs.plans import from_plan_items
-from sim.plants.beside import CompanionSide
+from sim.plants.beside import CompanionSide, companion_params
 from sim.plants.px4 import PX4Plant
 from sim.policies import COMPANION_POLICY, PX4_VEHICLE
 from sim.px4.companion_operator import PX4CompanionOperator
 from sim.px4.process import PX4Error
 from sim.scenario import Scenario, Station
 from vehicle.companion.setup import PX4_NEEDS
-from vehicle.params import Params, load_defaults
+from vehicle.params import Params
 
 # PX4's own defaults of what the companion checks (src/modules/commander/commander_params.c), which --configure
 # starts from
@@ -62,6 +62,7 @@ class PX4CompanionPlant(CompanionSide, PX4Plant):
 
     policies = (COMPANION_POLICY,)
     FAILURE = PX4Error
+    rangefinders = True  # the rover's six, through PX4 (DISTANCE_SENSOR on its simulator link): issue 41
     WORDS = ("{version}", "telemetry link", "PX4", "PX4's", "PX4 nav states")
 
     def __init__(self, scenario: Scenario, kind: str = PX4_VEHICLE, seed: int | None = None,
@@ -70,9 +71,7 @@ class PX4CompanionPlant(CompanionSide, PX4Plant):
         super().__init__(scenario, kind, seed, policy, px4, log_path, accept_timeout_s)
         self.lnk_timeout = float(scenario.params.get("LNK_TIMEOUT", 3.0))  # the companion's, not PX4's
         if params is None:
-            params = load_defaults()
-            for k, v in scenario.params.items():
-                params.set(k, v)
+            params = companion_params(scenario.params, self.robot.shape.radius)
         self._init_companion(params, "PX4", companion_options)
 
     @staticmethod

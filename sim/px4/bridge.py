@@ -116,14 +116,17 @@ class HilBridge:
                 s.close()
         self.conn = None
 
-    def step(self, state: RoverState, dt: float) -> Wheels:
-        """Send the sensors for ``state`` at the bridge's clock (and the GPS when due), keep pace with PX4, move
-        the clock on by ``dt``, and return PX4's newest wheel commands (zeros until it has sent any)."""
+    def step(self, state: RoverState, dt: float, extra: Sequence = ()) -> Wheels:
+        """Send the sensors for ``state`` at the bridge's clock (and the GPS when due, and the ``extra`` messages:
+        the rover's distance sensors), keep pace with PX4, move the clock on by ``dt``, and return PX4's newest wheel
+        commands (zeros until it has sent any)."""
         t = self.time_usec
         sensors = hil_sensor(state, t, self.field, self.origin.alt, ALL_SENSORS, self.noise, self.normal)
         out = sensors.pack(self.mav)
         if self.gps.due(t):
             out += hil_gps(state, t, self.origin).pack(self.mav)
+        for m in extra:
+            out += m.pack(self.mav)
         self._send(out)
         self._read()
         self._pace(t)

@@ -29,6 +29,7 @@ from pathlib import Path
 from pymavlink.dialects.v20 import common as mav
 
 from link.mission import Origin
+from sim.firmware.rangefinders import Rangefinders, distance_sensors
 from sim.px4.bridge import BridgeError, HilBridge
 from sim.px4.hil import RoverState, rover_command, to_local
 from sim.px4.process import GCS_UDP_PORT, PX4Error, PX4Process, claim_instance
@@ -157,8 +158,12 @@ class PX4Lockstep:
 
     def __init__(self, world: World, robot: Robot, px4_dir: Path, params: dict[str, float],
                  origin: Origin | None = None, seed: int = 0, log_path: Path | None = None,
-                 accept_timeout_s: float = ACCEPT_TIMEOUT_S, boot_limit_s: float = BOOT_LIMIT_S) -> None:
+                 accept_timeout_s: float = ACCEPT_TIMEOUT_S, boot_limit_s: float = BOOT_LIMIT_S,
+                 rangefinders: Rangefinders | None = None) -> None:
+        """``rangefinders``: the rover's (``sim.firmware.rangefinders``), sent to PX4 as DISTANCE_SENSOR on its
+        simulator link at their own pace; None, a rover without."""
         self.world, self.robot = world, robot
+        self.rangefinders = rangefinders
         self.px4_dir = Path(px4_dir)
         self.params = dict(params)
         self.origin = origin or Origin()
@@ -240,8 +245,13 @@ class PX4Lockstep:
 
     def _step(self) -> None:
         """One physics step: the sensors of the state reached go to PX4, its newest wheel commands drive the next."""
+        extra = ()
+        rf = self.rangefinders
+        if rf is not None and rf.due(self.t_sim):
+            x, y, yaw = self.robot.pose
+            extra = distance_sensors(rf.measure(self.t_sim, x, y, yaw), self.bridge.time_usec // 1000)
         try:
-            w = self.bridge.step(self._state(), PHYS_DT)
+            w = self.bridge.step(self._state(), PHYS_DT, extra)
         except BridgeError as e:
             alive = "running" if self.process.alive() else "exited"
             raise PX4Error(f"{e} (PX4 {alive}); its last words:\n{self.process.log_tail()}") from None

@@ -14,6 +14,12 @@ a lockstep simulation.
 The vehicle boots once the autopilot has said where it is (its EKF reports a horizontal position), on that pose,
 so the trail never starts at a made-up origin. Until then reads pass and state changes are answered
 TEMPORARILY_REJECTED.
+
+The rover's range data (``vehicle.companion.ranges``, read by ``AutopilotDriver``) is the vehicle's range sensor. The
+companion says once what it hears: the sources of the first range data, or, QUIET_S after it booted with none
+heard, that the return keeps no standoff (everything else as without the sensors). Range data is relayed to the
+ground at most once every RANGE_RELAY_S per sensor: the return asks for it at 10 Hz, six rangefinders are 60
+messages a second, and a telemetry radio has better uses for its air time.
 """
 
 from __future__ import annotations
@@ -30,6 +36,8 @@ from link.mission import Origin
 from link.signing import Key, SigningVerdict, Streams, sim_stamp
 from vehicle.companion import router
 from vehicle.companion.autopilot import AutopilotDriver, is_autopilot_heartbeat, rover_problem
+from vehicle.companion.ranges import KINDS as RANGE_KINDS
+from vehicle.companion.ranges import QUIET_S
 from vehicle.companion.router import COMPANION_COMPID, Action, Authority, Decision, Dest
 from vehicle.companion.voice import GroundVoice, frame_msgid
 from vehicle.core import boot_core
@@ -44,6 +52,7 @@ from vehicle.services.native import vehicle_services
 from vehicle.services.telemetry import DEFAULT_RATES
 
 NOTICE_GAP = 2.0  # s between STATUSTEXTs about the same refused stream from the same sender
+RANGE_RELAY_S = 1.0  # s between one sensor's range messages relayed to the ground (the return reads all of them)
 # the endpoint's own reports of what the autopilot reports for the same system: the autopilot's copy reaches the
 # ground already, and ground stations keep one value per message type and system, so a second copy from component
 # 191 would make their position, health, mode and mission progress flicker between the two (the return's progress
@@ -148,6 +157,9 @@ class Companion:
         self.held_drive = False
         self.last_mode: int | None = None
         self.ground_mode_at: float | None = None
+        self.booted_at: float | None = None
+        self.ranges_said: str | None = None  # what the companion said of the range data: "heard", "none" (once each)
+        self.range_relayed: dict[tuple, float] = {}  # (sysid, compid, message, sensor) -> when last relayed
 
     # ----- input -----------------------------------------------------------------------------------------------
     def from_autopilot(self, data: bytes, t: float) -> None:
@@ -169,10 +181,21 @@ class Companion:
             if d.seen.sysid is not None and self.identity_problem is None and is_autopilot_heartbeat(m) \
                     and m.get_srcSystem() == d.seen.sysid:
                 self.identity_problem = rover_problem(m)
-            if self._for_companion(m):
+            if self._for_companion(m) or (m.get_type() in RANGE_KINDS and not self._relay_range(m, t)):
                 continue
             self.to_ground(self.voice.relay(m))
             self.counters["relayed"] += 1
+
+    def _relay_range(self, m, t: float) -> bool:
+        """Whether this range message goes on to the ground: a sensor's first in RANGE_RELAY_S."""
+        key = (m.get_srcSystem(), m.get_srcComponent(), m.get_type(), getattr(m, "id", 0),
+               getattr(m, "orientation", 0))
+        if t - self.range_relayed.get(key, -math.inf) < RANGE_RELAY_S:
+            return False
+        if len(self.range_relayed) >= 1024:  # (a vehicle has a few dozen sensors: anything more is noise)
+            self.range_relayed.clear()
+        self.range_relayed[key] = t
+        return True
 
     def _for_companion(self, m) -> bool:
         fields = m.get_fieldnames()
@@ -323,6 +346,8 @@ class Companion:
         if self.vehicle is None and d.ready() and self.identity_problem is None:
             self._boot(t)
         self.healthy = self._tick_vehicle(t) if self.vehicle is not None else True
+        if self.vehicle is not None and self.ranges_said != "heard":
+            self._say_ranges(t)
         why = d.tick(t, self.healthy)
         if why is not None and self.vehicle is not None:
             self.preempted = True
@@ -341,9 +366,25 @@ class Companion:
                       stamp=self.stamp, services=SERVICES, mav_type=apm.MAV_TYPE_ONBOARD_CONTROLLER,
                       autopilot=apm.MAV_AUTOPILOT_INVALID)
         self.vehicle, self.endpoint = v, ep
+        self.booted_at = t
         x, y, yaw = d.pose()
         v.announce(f"returnlink companion on {self.autopilot_name}: vehicle at ({x:.1f}, {y:.1f}) m, "
                          f"heading {math.degrees(yaw) % 360:.0f} deg")
+
+    def _say_ranges(self, t: float) -> None:
+        """Once: the range data the return keeps off (its sources), or that none came in QUIET_S (then once more
+        if some comes later)."""
+        v, ranges = self.vehicle, self.driver.ranges
+        assert v is not None and self.booted_at is not None
+        if ranges.first_heard is not None:
+            self.ranges_said = "heard"
+            body = v.params["RTL_BODY_R"]
+            keeps = (f"the return keeps its {body:g} m body off what they see" if body > 0 else
+                     "but RTL_BODY_R is 0: the return keeps no standoff")
+            v.announce(f"range sensor heard ({ranges.describe()}): {keeps}")
+        elif self.ranges_said is None and t - self.booted_at >= QUIET_S:
+            self.ranges_said = "none"
+            v.announce("no range sensor heard: return keeps no standoff")
 
     def _tick_vehicle(self, t: float) -> bool:
         """The vehicle's own tick, then the return's hold on the autopilot. False: the tick failed (reported,

@@ -9,7 +9,10 @@ the keepalive) is one code for both. What follows is ArduPilot's story; PX4's is
 Readings come from the autopilot's own filtered estimate: LOCAL_POSITION_NED (asked for at 10 Hz with
 MAV_CMD_SET_MESSAGE_INTERVAL) as the position fix, ATTITUDE as heading and yaw rate, GPS_RAW_INT and
 EKF_STATUS_REPORT for how far to trust it. The vehicle's estimator fuses them exactly as it fuses a robot's
-sensors, so the trail and the return see one pose whatever the robot is.
+sensors, so the trail and the return see one pose whatever the robot is. The rover's range data (DISTANCE_SENSOR,
+asked for at 10 Hz beside the estimate, and OBSTACLE_DISTANCE; from the autopilot or from any other component of its
+system, such as a lidar driver) is the vehicle's range sensor (``vehicle.companion.ranges``): the return keeps its
+body off what it sees, as the native rover's does.
 
 Commands reach the autopilot only while a return holds the lease (``engage``): the companion switches it to
 GUIDED and streams SET_POSITION_TARGET_LOCAL_NED velocity and turn-rate targets at 10 Hz. Rover stops a velocity
@@ -36,6 +39,8 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from vehicle.companion import px4
+from vehicle.companion.ranges import KINDS as RANGE_KINDS
+from vehicle.companion.ranges import RangeSensors
 from vehicle.io import Fix, Readings
 
 # ArduPilot Rover's mode numbers (Rover/mode.h)
@@ -56,6 +61,7 @@ STREAMS = {  # message id -> interval (µs) the companion needs
     apm.MAVLINK_MSG_ID_ATTITUDE: 100_000,
     apm.MAVLINK_MSG_ID_GPS_RAW_INT: 500_000,
     apm.MAVLINK_MSG_ID_EKF_STATUS_REPORT: 500_000,
+    apm.MAVLINK_MSG_ID_DISTANCE_SENSOR: 100_000,  # every rangefinder and proximity sector (none: nothing sent)
 }
 STREAM_CHECK = 5.0  # s between checks that the position stream still runs at its rate
 GCS_SYSID_PARAMS = ("MAV_GCS_SYSID", "SYSID_MYGCS")  # ArduPilot 4.7+, and before
@@ -232,6 +238,7 @@ class AutopilotDriver:
         self.last_attitude_read: float | None = None
         self.keepalives = 0  # sent, for the record
         self.braking_since: float | None = None  # released to HOLD, streaming zero targets until the rover stands
+        self.ranges = RangeSensors()  # the rover's range data, heard from any component of the autopilot's system
 
     # ----- what the autopilot says ---------------------------------------------------------------------------
     def observe(self, m, t: float) -> None:
@@ -249,6 +256,9 @@ class AutopilotDriver:
                 s.mav_type, s.autopilot = m.type, m.autopilot
                 s.mode, s.armed = m.custom_mode, bool(m.base_mode & apm.MAV_MODE_FLAG_SAFETY_ARMED)
                 self.mode_at = t
+        if kind in RANGE_KINDS and s.sysid is not None and m.get_srcSystem() == s.sysid:
+            # the autopilot's rangefinders, or a lidar driver's sectors: another component of the vehicle counts
+            self.ranges.heard(m, t, s.attitude[1] if s.attitude is not None else None)
         if s.sysid is None or m.get_srcSystem() != s.sysid or m.get_srcComponent() != s.compid:
             return
         s.heard = t
@@ -304,7 +314,8 @@ class AutopilotDriver:
     # ----- RobotDriver -----------------------------------------------------------------------------------------
     def read(self, t: float, dt: float) -> Readings:
         """This tick's readings: each new estimate once, as a fix or a heading; speed and yaw rate from the
-        freshest one (zero once it is stale: a lost autopilot must not be dead-reckoned onward)."""
+        freshest one (zero once it is stale: a lost autopilot must not be dead-reckoned onward); the range data
+        heard since the last tick as a scan (None: none, as from a rover without range sensors)."""
         s = self.seen
         fix = heading = None
         speed = yaw_rate = 0.0
@@ -319,7 +330,7 @@ class AutopilotDriver:
             speed = pos[3] * math.cos(yaw) + pos[4] * math.sin(yaw)
             if pos[0] != self.last_position_read:
                 fix, self.last_position_read = Fix(pos[1], pos[2], s.position_std()), pos[0]
-        return Readings(t, speed, yaw_rate, fix, heading, 0.02)
+        return Readings(t, speed, yaw_rate, fix, heading, 0.02, None, self.ranges.scan(t))
 
     def command(self, speed: float, yaw_rate: float) -> None:
         """The vehicle's command this tick; it reaches the autopilot only while engaged (see ``tick``)."""

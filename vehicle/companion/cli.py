@@ -32,13 +32,14 @@ from typing import Any, NamedTuple
 from link import args as types
 from vehicle.companion.app import Companion
 from vehicle.companion.links import Conn, ConnError, Framer, open_link, parse_conn, require_device
-from vehicle.companion.setup import check, differing, needs_for, report
+from vehicle.companion.setup import check, differing, needs_for, range_params, range_report, report
 from vehicle.companion.tlog import FROM_AUTOPILOT, FROM_GROUND, TO_AUTOPILOT, TO_GROUND, Tlog, TlogError
 from vehicle.port import DT
 
 START_WAIT = 15.0  # s to reach the autopilot and hear its heartbeat
 PARAM_WAIT = 3.0  # s to wait for the autopilot's parameters
 PARAM_RETRY = 1.0
+RANGE_WAIT = 2.0  # s for the range sensors' parameters (advice: an autopilot without them must not hold it up)
 REPORT_EVERY = 10.0  # s between reports of the same ground link failing
 
 
@@ -365,6 +366,8 @@ def _configure(shell: CompanionLoop, configure: bool) -> int:
     rows = check(shell.read_params(names), needs)
     if not configure:
         print(report(rows))
+        autopilot = shell.companion.driver.seen.autopilot
+        print(range_report(shell.read_params(range_params(autopilot), RANGE_WAIT), autopilot))
         return 1 if differing(rows) else 0
     failed = False
     for r in differing(rows):

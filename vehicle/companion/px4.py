@@ -65,6 +65,7 @@ STREAMS = {  # message id -> interval (µs): EKF_STATUS_REPORT is ArduPilot's; P
     apm.MAVLINK_MSG_ID_ATTITUDE: 100_000,
     apm.MAVLINK_MSG_ID_GPS_RAW_INT: 500_000,
     apm.MAVLINK_MSG_ID_ESTIMATOR_STATUS: 500_000,
+    apm.MAVLINK_MSG_ID_DISTANCE_SENSOR: 100_000,  # its distance sensors, as ArduPilot's (vehicle.companion.ranges)
 }
 STREAM_LEAD = 0.2  # s of setpoints before asking for Offboard: PX4 wants one fresher than COM_OF_LOSS_T
 MODE_RETRY = 0.3  # s before a refused or unanswered Offboard request is sent again (the stream may be just starting)

@@ -93,3 +93,56 @@ def report(rows: list[Row]) -> str:
         state = "absent" if r.value is None else ("ok" if r.ok else "DIFFERS")
         lines.append(f"{r.need.name:<16} {now:>8}  {r.need.wanted:<12} {state:<8} {r.need.why}")
     return "\n".join(lines)
+
+
+# ----- the return's range sensors: advice, not a need (a rover without them is driven as before, §11.4) ----------
+RANGEFINDERS = 6  # ArduPilot's RNGFND1..6 are read (a rover's ring of rangefinders)
+ORIENT_WORDS = {0: "forward", 1: "forward-right", 2: "right", 3: "back-right", 4: "back", 5: "back-left", 6: "left",
+                7: "forward-left"}  # RNGFNDn_ORIENT that point a beam along the ground: the ones the return uses
+PX4_RANGE_DRIVERS = ("SENS_EN_SF1XX", "SENS_EN_LL40LS", "SENS_EN_TRANGER")  # a few of PX4's distance sensor drivers
+STREAM_WORDS = ("  DISTANCE_SENSOR: the companion asks for it at 10 Hz itself (MAV_CMD_SET_MESSAGE_INTERVAL on its "
+                "port);")
+
+
+def range_params(autopilot: int | None) -> list[str]:
+    """The parameters ``range_report`` reads."""
+    if autopilot == 12:
+        return list(PX4_RANGE_DRIVERS)
+    names = [f"RNGFND{n}_{p}" for n in range(1, RANGEFINDERS + 1) for p in ("TYPE", "ORIENT")]
+    return names + ["PRX1_TYPE"]
+
+
+def range_report(values: dict[str, float], autopilot: int | None) -> str:
+    """What ``--check`` prints about the range sensors the return keeps its body off: which of the autopilot's
+    parameters give it some, and how their readings reach the companion."""
+    lines = ["range sensors (the return keeps its body off what they see; none: no standoff, as before):"]
+    usable = False
+    if autopilot == 12:
+        on = [f"{n} {values[n]:g}" for n in PX4_RANGE_DRIVERS if values.get(n)]
+        usable = bool(on)
+        lines.append(f"  {', '.join(on)}: a distance sensor driver enabled" if on else
+                     f"  {', '.join(PX4_RANGE_DRIVERS)}: none enabled (or another driver: any distance sensor PX4 "
+                     "reports counts)")
+        lines.append(STREAM_WORDS + " PX4 streams it at 0.5 Hz otherwise")
+    else:
+        for n in range(1, RANGEFINDERS + 1):
+            kind, orient = values.get(f"RNGFND{n}_TYPE"), values.get(f"RNGFND{n}_ORIENT")
+            if not kind:
+                continue
+            where = ORIENT_WORDS.get(int(orient)) if orient is not None else None
+            usable = usable or where is not None
+            lines.append(f"  RNGFND{n}_TYPE {kind:g}, RNGFND{n}_ORIENT "
+                         + (f"{orient:g}: facing {where}" if where else f"{orient if orient is None else int(orient)}"
+                            ": not along the ground (the return uses ORIENT 0..7)"))
+        prx = values.get("PRX1_TYPE")
+        if prx:
+            usable = True
+            lines.append(f"  PRX1_TYPE {prx:g}: a proximity sensor, its sectors sent as DISTANCE_SENSOR")
+        elif not usable:
+            lines.append("  RNGFNDn_TYPE (with RNGFNDn_ORIENT 0..7) or PRX1_TYPE (a 360-degree lidar): none set up")
+        lines.append(STREAM_WORDS + " its stream group is MAVn_EXTRA3 (SRn_EXTRA3 before 4.7)")
+    lines.append("  a lidar driver's OBSTACLE_DISTANCE from any component of the vehicle is heard as well")
+    if not usable:
+        lines.append("  none set up here: unless another component sends OBSTACLE_DISTANCE, the return keeps no "
+                     "standoff")
+    return "\n".join(lines)
