@@ -8,7 +8,12 @@ the sense taken out (no rangefinders, no lidar): the returns touched twice and t
 RTL_BODY_R 0 (no standoff) no return touched either: in this world it is the route kept clear of the walls the
 sensors saw (``vehicle.clearance``) that keeps the returns off. PX4 gets the same six rangefinders on its simulator
 link and reports them as its own distance sensors. One autopilot per run, on an instance of its own, stopped by its
-pid when the run ends."""
+pid when the run ends.
+
+Since the scripted operator drives as the native one does (issue 41 item 3, merged after the check above) it no
+longer drives back into the dead zone after the first return, so these 60 s hold one return, not the two that
+touched: this run is now a guard that the sense is heard and the return stays off the walls, and the check that
+fails without the sense is the driver's own (``tests/test_companion_ranges.py``)."""
 
 from __future__ import annotations
 
@@ -49,7 +54,9 @@ def test_the_firmwares_rangefinders_reach_the_companion_as_its_distance_sensor_m
 def test_the_companions_returns_touch_no_wall(flown):
     m = flown.metrics
     returns = [b for b in m["blocks"] if b["command"] == "RETURN_TO_LINK"]
-    assert len(returns) >= 2, m["blocks"]  # the returns that touched before
+    # the returns that touched before the sense: two in these 60 s while the operator drove back into the dead
+    # zone after each; since it drives home from where a return left the rover (issue 41 item 3) there is one
+    assert len(returns) >= 1, m["blocks"]
     assert m["collisions_during_return"] == 0, m["lease_events"]
 
 
