@@ -59,6 +59,8 @@ class ServedVehicle:
 
 
 def wait_until(predicate: Callable[[], bool], timeout: float, what: str) -> None:
+    """Until ``predicate`` holds; ``timeout`` (wall-clock s) is a hang guard, never a speed check: the callers give
+    20 s, since a 5 s wait for MAVSDK's flight mode ran out once while the other test worker kept both cores busy."""
     end = time.monotonic() + timeout
     while not predicate():
         assert time.monotonic() < end, f"timed out after {timeout} s waiting for {what}"

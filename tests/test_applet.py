@@ -132,4 +132,5 @@ def test_the_operator_drives_again_if_nobody_returns_the_rover():
     for k in range(12):  # standing still in GUIDED for over REST_S: no applet at work
         heard(op, 10.0 + 0.2 * k, GUIDED, 0.0)
         op.tick(10.0 + 0.2 * k)
-    assert not op.applet_busy and op.sent_target is not None
+    # driving again: toward a waypoint of its own (the native steering: since issue 41 no position target)
+    assert not op.applet_busy and op.heading_to is not None

@@ -153,7 +153,7 @@ def test_drive_refused_while_awaiting_claim_exits_1_and_says_claim(served, capsy
     url = ["gcs", "--url", f"udpin:127.0.0.1:{served.gcs_port}"]
     assert main([*url, "acquire"]) == 0
     assert main([*url, "rtl"]) == 0  # a commanded return over a good link: it ends, the lease awaits a claim
-    wait_until(lambda: served.vehicle.state() == 2, 15, "AWAITING_CLAIM")
+    wait_until(lambda: served.vehicle.state() == 2, 20, "AWAITING_CLAIM")
     capsys.readouterr()
     assert main([*url, "drive", "0.5", "0", "1"]) == 1
     err = capsys.readouterr().err

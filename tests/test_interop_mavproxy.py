@@ -35,11 +35,11 @@ def mavproxy(tmp_path):
 def test_param_set_show_and_refusal(mavproxy):
     served, say, log = mavproxy
     say("param set LNK_TIMEOUT 5")
-    wait_until(lambda: served.vehicle.params["LNK_TIMEOUT"] == 5.0, 10, "LNK_TIMEOUT = 5 on the vehicle")
+    wait_until(lambda: served.vehicle.params["LNK_TIMEOUT"] == 5.0, 20, "LNK_TIMEOUT = 5 on the vehicle")
     say("param show LNK_TIMEOUT")
-    wait_until(lambda: "LNK_TIMEOUT      5.0" in log.read_text(), 10, "param show to print 5.0")
+    wait_until(lambda: "LNK_TIMEOUT      5.0" in log.read_text(), 20, "param show to print 5.0")
     say("param set LNK_TIMEOUT 999")
-    wait_until(lambda: "outside 0.5..120" in log.read_text(), 10, "the refusal STATUSTEXT in MAVProxy")
+    wait_until(lambda: "outside 0.5..120" in log.read_text(), 20, "the refusal STATUSTEXT in MAVProxy")
     time.sleep(0.5)
     assert served.vehicle.params["LNK_TIMEOUT"] == 5.0
     assert "fence breach" not in log.read_text()  # no fence, none breached
@@ -50,14 +50,14 @@ def test_wp_load_schedules_the_plan_and_mode_rtl_returns(mavproxy, tmp_path):
     plan = tmp_path / "plan.txt"
     plan.write_text(PLAN)
     say("arm throttle")
-    wait_until(lambda: served.vehicle.armed, 10, "arm throttle to arm the vehicle")
+    wait_until(lambda: served.vehicle.armed, 20, "arm throttle to arm the vehicle")
     say(f"wp load {plan}")
-    wait_until(lambda: "TYPE_MISSION: ACCEPTED" in log.read_text(), 15, "MISSION_ACK accepted")
+    wait_until(lambda: "TYPE_MISSION: ACCEPTED" in log.read_text(), 20, "MISSION_ACK accepted")
     assert len(served.vehicle.book.plan) == 2
     assert [it.command for it in served.vehicle.plan_items] == [44002, 44003, 19]
     say("mode RTL")
-    wait_until(lambda: "DO_SET_MODE: ACCEPTED" in log.read_text(), 10, "DO_SET_MODE accepted")
-    wait_until(lambda: served.vehicle.state() in (State.RETURNING, State.HOLDING), 5, "the return plan to run")
+    wait_until(lambda: "DO_SET_MODE: ACCEPTED" in log.read_text(), 20, "DO_SET_MODE accepted")
+    wait_until(lambda: served.vehicle.state() in (State.RETURNING, State.HOLDING), 20, "the return plan to run")
     assert any(e.reason.name == "OPERATOR_EXPIRE" for e in served.vehicle.event_log)
 
 

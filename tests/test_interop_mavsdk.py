@@ -39,7 +39,7 @@ def flight():
 def test_health_all_ok_and_position(flight):
     served, system = flight
     tel = Telemetry(system)
-    wait_until(tel.health_all_ok, 10, "health_all_ok")
+    wait_until(tel.health_all_ok, 20, "health_all_ok")
     pos = tel.position()
     assert abs(pos.latitude_deg - 47.3977) < 0.001 and abs(pos.longitude_deg - 8.5456) < 0.001
 
@@ -61,7 +61,7 @@ def test_manual_control_moves_the_vehicle(flight):
     served, system = flight
     Action(system).arm()
     tel = Telemetry(system)
-    wait_until(lambda: math.isfinite(tel.position_velocity_ned().position.north_m), 5, "LOCAL_POSITION_NED")
+    wait_until(lambda: math.isfinite(tel.position_velocity_ned().position.north_m), 20, "LOCAL_POSITION_NED")
     before = tel.position_velocity_ned().position.north_m
     mc = ManualControl(system)
     for _ in range(10):
@@ -94,10 +94,10 @@ def test_return_to_launch_and_hold_read_back_as_flight_modes(flight):
     served, system = flight
     tel, act = Telemetry(system), Action(system)
     act.return_to_launch()
-    wait_until(lambda: tel.flight_mode() == FlightMode.RETURN_TO_LAUNCH, 5, "flight mode RETURN_TO_LAUNCH")
+    wait_until(lambda: tel.flight_mode() == FlightMode.RETURN_TO_LAUNCH, 20, "flight mode RETURN_TO_LAUNCH")
     assert served.vehicle.state() == State.RETURNING
     act.hold()
-    wait_until(lambda: tel.flight_mode() == FlightMode.HOLD, 5, "flight mode HOLD")
+    wait_until(lambda: tel.flight_mode() == FlightMode.HOLD, 20, "flight mode HOLD")
     assert served.vehicle.state() == State.TELEOP  # the operator took a newer lease over the return
 
 
@@ -107,6 +107,6 @@ def test_mavlink_direct_receives_lease_status(flight):
     assert direct.load_custom_xml(dialect.xml_text()) == MavlinkDirectResult.SUCCESS
     got = []
     direct.subscribe_message("LEASE_STATUS", lambda msg, _ud: got.append(json.loads(msg.fields_json)))
-    wait_until(lambda: got, 5, "LEASE_STATUS through MavlinkDirect")
+    wait_until(lambda: got, 20, "LEASE_STATUS through MavlinkDirect")
     assert got[-1]["owner_sysid"] == 245  # MAVSDK took the vehicle implicitly (LEASE_AUTOGRANT)
     assert got[-1]["epoch"] == served.vehicle.book.epoch

@@ -120,10 +120,10 @@ def test_map_page_in_headless_chromium_shows_the_trail_grow_and_rtl(mapped, tmp_
                 client.gs.drive_velocity(0.8, 0.0)  # the background thread streams it
             count = lambda: int(page.get_attribute("#trail", "data-count"))  # noqa: E731
             first = count()
-            wait_until(lambda: count() >= first + 5, 15, "the trail to grow on the page")
+            wait_until(lambda: count() >= first + 5, 20, "the trail to grow on the page")
             assert page.locator("#trail polyline.trail-good").count() >= 1  # a perfect link: all good
             # the link layer: the vehicle's map of where its owner's packets arrived, every cell good here
-            wait_until(lambda: int(page.get_attribute("#linkmap", "data-count")) >= 2, 15, "the link layer")
+            wait_until(lambda: int(page.get_attribute("#linkmap", "data-count")) >= 2, 20, "the link layer")
             assert page.locator("#linkmap rect.linkmap-good").count() >= 1
             assert page.locator("#linkmap rect.linkmap-poor").count() == 0
             with server.station.session.lock:

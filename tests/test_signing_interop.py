@@ -41,16 +41,16 @@ def test_mavproxy_with_the_signing_module_flies_a_keyed_vehicle(keyed, tmp_path)
         # unsigned, it can still download the parameters ...
         mp.wait_for_parameters(len(SPECS))
         say("param set LNK_TIMEOUT 5")  # ... but not set one
-        wait_until(lambda: "unsigned PARAM_SET from 255 refused" in log.read_text(), 10, "the refusal")
+        wait_until(lambda: "unsigned PARAM_SET from 255 refused" in log.read_text(), 20, "the refusal")
         assert served.vehicle.params["LNK_TIMEOUT"] == 3.0
         say(f"signing key {PASSPHRASE}")
-        wait_until(lambda: "Setup signing key" in log.read_text(), 10, "MAVProxy to take the key")
+        wait_until(lambda: "Setup signing key" in log.read_text(), 20, "MAVProxy to take the key")
         say("param set LNK_TIMEOUT 5")
-        wait_until(lambda: served.vehicle.params["LNK_TIMEOUT"] == 5.0, 10, "LNK_TIMEOUT = 5 on the vehicle")
+        wait_until(lambda: served.vehicle.params["LNK_TIMEOUT"] == 5.0, 20, "LNK_TIMEOUT = 5 on the vehicle")
         say("long 32100 1 0 10 0")  # MAV_CMD_REQUEST_OPERATOR_CONTROL: with a key, no one is granted the root
-        wait_until(lambda: served.vehicle.book.owner == 255, 10, "MAVProxy to own the vehicle")
+        wait_until(lambda: served.vehicle.book.owner == 255, 20, "MAVProxy to own the vehicle")
         say("mode RTL")
-        wait_until(lambda: "DO_SET_MODE: ACCEPTED" in log.read_text(), 10, "DO_SET_MODE accepted")
+        wait_until(lambda: "DO_SET_MODE: ACCEPTED" in log.read_text(), 20, "DO_SET_MODE accepted")
         # the operator lease expired: the return plan ran (at the start of the adit there is no trail to follow)
         assert any(e.reason.name == "OPERATOR_EXPIRE" for e in served.vehicle.event_log)
         assert served.server.endpoint.counters.signing[SigningVerdict.ACCEPT] > 0
@@ -66,7 +66,7 @@ def test_mavsdk_can_watch_a_keyed_vehicle_but_not_act(keyed):
         system = sdk.first_autopilot(10.0)
         assert system is not None, "MAVSDK did not discover the keyed vehicle"
         tel = Telemetry(system)
-        wait_until(tel.health_all_ok, 10, "health_all_ok")
+        wait_until(tel.health_all_ok, 20, "health_all_ok")
         assert abs(tel.position().latitude_deg - 47.3977) < 0.001
         par = Param(system)
         assert par.get_param_float("LNK_TIMEOUT") == pytest.approx(3.0)
