@@ -19,7 +19,8 @@ time (``firmware``, ``interop``) is in one group, ``outside``: they run one afte
 in-process tests on the other worker, so two SITLs, two Ray clusters or two real-time servers never compete for the
 two cores and the wall-clock guards keep the margins they were set with. Tests marked ``exclusive`` need the
 machine to themselves (the README walkthrough uses the default ports 5760 and 14550, which any served vehicle
-sends to): ``make test`` runs them afterwards, alone.
+sends to; MAVSDK's flight-mode read-back, which fails beside a busy worker: its file says so): ``make test`` runs
+them afterwards, alone.
 
 In CI (CI=true) hypothesis explores a fixed pseudo-random set of cases, so a submission's result is reproducible;
 on a developer's machine every run explores new ones.

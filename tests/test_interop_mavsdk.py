@@ -19,7 +19,10 @@ from link import dialect
 from tests.interop import ServedVehicle, wait_until
 from vehicle.app import State
 
-pytestmark = pytest.mark.interop
+# exclusive: run alone after the rest (tests/conftest.py). On two workers the return-to-launch test failed in both
+# full runs (MAVSDK never reported RETURN_TO_LAUNCH within 20 s: the plan's first block, a return to the link, ends
+# at once where the link is good) and passed in every run alone; the cause under load is not yet found
+pytestmark = [pytest.mark.interop, pytest.mark.exclusive]
 
 
 @pytest.fixture(scope="module")
