@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from gcs.file_transfer import Download, FileClient
 from gcs.mission_transfer import MissionClient, Transfer
 from link import dialect
-from link.codec import read_frames
+from link.codec import read_datagram
 from link.mission import Item
 from link.modes import PX4_AUTO, PX4_AUTO_LOITER
 from link.setpoints import VELOCITY, VELOCITY_YAW_RATE
@@ -158,7 +158,7 @@ class GroundStation:
     def feed(self, data: bytes, t: float) -> None:
         self.t = t
         try:
-            msgs = read_frames(self.parser, data)
+            msgs = read_datagram(self.parser, data)
         except Exception:  # noqa: BLE001 - a garbled frame must not stop the station
             self.parser = mav.MAVLink(None, 0, 0)
             self.parser.robust_parsing = True

@@ -52,20 +52,30 @@ def read_frames(parser, data) -> list:
     return out
 
 
-def drop_partial(parser) -> int:
-    """Drop the unfinished frame a datagram left at its end, and say how many bytes it held (0: none).
+def read_datagram(parser, data) -> list:
+    """``read_frames`` of one whole datagram: bytes left unfinished at its end (a start-of-frame byte and a header
+    whose length runs past the datagram: garbage, or a frame cut short) come back as one more BAD_DATA and the
+    parser starts the next datagram empty.
 
-    Why: pymavlink's parser is a stream parser. A datagram is whole, so bytes left at its end (a start-of-frame
-    byte and a header whose length runs past the datagram, garbage or a truncated frame) are no frame; kept, they
-    would take the first bytes of the next datagram as the rest of theirs, fail the CRC and swallow that datagram's
-    valid frame: one stray datagram would cost the owner's next command. (Serial links are cut into whole frames
-    before they reach a parser: ``vehicle.companion.links``.)"""
-    left = parser.buf_len()
-    if left:
-        parser.buf = bytearray()
-        parser.buf_index = 0
-        parser.expected_length = HEADER_V2 + CHECKSUM
-    return left
+    Why: pymavlink's parser is a stream parser (and ``read_frames`` answers exactly as it does). Kept, such a tail
+    took the first bytes of the next datagram as the rest of its frame, failed the CRC and swallowed that
+    datagram's valid frame: one stray datagram cost the owner's next command. Both ends read datagrams (UDP, the
+    simulator's bus; serial links are cut into whole frames first: ``vehicle.companion.links``)."""
+    out = read_frames(parser, data)
+    if parser.robust_parsing and parser.buf_len() > 0:
+        out.append(_drop_tail(parser))
+    return out
+
+
+def _drop_tail(parser):
+    """The unfinished tail of a datagram, taken out of ``parser`` as BAD_DATA (see ``read_frames``)."""
+    mod = sys.modules[type(parser).__module__]  # the generated dialect module: its BAD_DATA
+    tail = parser.buf[parser.buf_index:]
+    parser.buf = bytearray()
+    parser.buf_index = 0
+    parser.expected_length = HEADER_V2 + CHECKSUM
+    parser.total_receive_errors += 1
+    return mod.MAVLink_bad_data(tail, "unfinished frame at the end of a datagram")
 
 
 def _decode_one(parser, data):

@@ -19,7 +19,7 @@ from pathlib import Path
 from types import MethodType
 from typing import Any, NamedTuple
 
-from link.codec import drop_partial, read_frames
+from link.codec import read_datagram
 from link.mission import Origin
 from link.signing import Key, sim_stamp
 from vehicle.keystore import KeyStore
@@ -92,13 +92,11 @@ class Endpoint:
         """Parse and handle whatever frames ``data`` holds; garbage is counted and dropped. ``source`` (a UDP
         address, opaque here) is remembered per sender, so the transport can keep the owner's (``pinned``)."""
         try:
-            msgs = read_frames(self.parser, data)
+            msgs = read_datagram(self.parser, data)
         except Exception:  # noqa: BLE001 - a hostile byte stream must never take the vehicle down
             self.counters.bad_frames += 1
             self.parser = _parser()
             return
-        if drop_partial(self.parser):  # a datagram is whole: its unfinished tail must not eat the next datagram
-            self.counters.bad_frames += 1
         self._source = source
         try:
             for m in msgs:
