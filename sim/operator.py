@@ -2,7 +2,7 @@
 
 It only knows what a real operator's screen shows (telemetry and lease status that reached it over the radio),
 never the simulator's truth: it takes control, uploads the return plan, arms, drives the route by steering the
-reported position toward each waypoint, stops pushing when its telemetry goes stale, and when the vehicle is
+reported position toward each waypoint, lets go of the stick when its telemetry goes stale, and when the vehicle is
 back and waiting for a claim it claims the fresh lease and drives the resume route.
 
 Like a person, it learns from a lost link: a place it was driving toward when the link died is tried again, but
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from gcs.station import GroundStation, LeaseStatus, Pending, Transfer, VehicleView, mav
 from link.mission import Item
 
-STALE_TELEMETRY = 1.0  # s: an operator stops pushing the stick when the picture freezes
+STALE_TELEMETRY = 1.0  # s: an operator lets go of the stick when the picture freezes
 WAYPOINT_RADIUS = 1.5  # m
 # what ``step`` compares the vehicle's status with every tick, looked up in the dialect once
 _AWAITING_CLAIM, _TELEOP = mav.RETURNLINK_STATE_AWAITING_CLAIM, mav.RETURNLINK_STATE_TELEOP
@@ -106,7 +106,9 @@ class Operator:
             return
         if not fresh:
             self.cut_off = self.heading_to or self.cut_off  # the latest sign of a loss names the place
-            gs.stop_streaming()  # the picture froze: stop pushing the stick
+            # the picture froze: the hand comes off the stick, and the joystick streams it at rest whatever the
+            # station hears, as ground stations' joysticks do (docs/simulate.md, "The scripted station")
+            gs.stop()
             return
         if st.state != _TELEOP or st.owner != gs.sysid:
             if st.state == _RETURNING and st.last_reason == _COMMS_LOST:

@@ -176,10 +176,9 @@ class FirmwareOperator:
 
     def _hold_still(self, t: float) -> None:
         """A zero stick, streamed as the native station streams it (``GroundStation.stop``): when the route is
-        driven, and when the picture has frozen. The native operator then stops streaming and its vehicle stops
-        0.5 s after the last setpoint (``vehicle.teleop.SETPOINT_TTL``); GUIDED keeps driving the last velocity for
-        3 s, so the operator lets go of its stick instead, which stops the rover as soon as any of it gets through
-        a fading link."""
+        driven, and when the picture has frozen: the hand comes off the stick and the joystick streams it at rest
+        whatever the station hears, as the native station's does, which stops the rover as soon as any of it gets
+        through a fading link (GUIDED alone would keep driving the last velocity for 3 s)."""
         self._stick(t, STOPPED, frame=apm.MAV_FRAME_BODY_NED)
 
     def request_rtl(self, t: float) -> None:
