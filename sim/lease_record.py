@@ -19,7 +19,7 @@ import numpy as np
 
 from sim.policies.base import Baseline
 from sim.scenario import PLAN_COMMANDS
-from vehicle.app import DT
+from vehicle.core import DT
 
 COMMAND_NAMES = {num: name for name, num in PLAN_COMMANDS.items()}
 

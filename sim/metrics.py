@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from vehicle.app import DT, State
+from vehicle.core import DT, State
 from vehicle.link_watch import GOOD_QUALITY as GOOD_LINK_QUALITY
 
 KEYS = ("scenario", "vehicle", "seed", "sim_duration_s", "link_lost_s", "return_started_s", "reaction_latency_s",

@@ -37,7 +37,7 @@ from sim.plants import Plant
 from sim.plants.native import TICK_RATE, NativePlant
 from sim.policies import APPLET_POLICY, COMPANION_POLICY, DEFAULT_POLICY, FIRMWARE_VEHICLE, PX4_VEHICLE
 from sim.scenario import Scenario
-from vehicle.app import DT
+from vehicle.core import DT
 from vehicle.lease import Holder
 from vehicle.lease_terms import State
 

@@ -23,7 +23,7 @@ from link.radio import LinkState
 from sim.robots import Robot
 from sim.scenario import Event, Station
 from sim.world import World
-from vehicle.app import Vehicle
+from vehicle.core import Core
 
 
 class Plant(Protocol):
@@ -52,7 +52,7 @@ class Plant(Protocol):
     stale: int  # actuations its own audit found outside the lease (the companion's router: frames it forwarded)
 
     @property
-    def vehicle(self) -> Vehicle | None:
+    def vehicle(self) -> Core | None:
         """returnlink's vehicle aboard, whose leases the run records; None: none (or not booted yet)."""
 
     # ----- the scenario around it ----------------------------------------------------------------------------
