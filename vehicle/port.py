@@ -26,6 +26,7 @@ import numpy as np
 from vehicle.estimator import Pose
 from vehicle.lease import Check, ExpireReason, LeaseBook, LeaseEvent
 from vehicle.service import PlanItem, ServiceState
+from vehicle.teleop import Setpoint
 
 DT = 0.02  # the control tick: 50 Hz (the tick is ``vehicle.control.ControlLoop``; every loop that drives one uses it)
 
@@ -61,6 +62,19 @@ class Status(NamedTuple):
     displacement: float  # how far the running block has taken the robot from where it started (0: none runs)
     route_remaining: float  # metres of the running block's route still ahead (0: none)
     trail_points: int  # crumbs in the breadcrumb trail
+    # what an observer of the whole run needs besides (the simulator's record, metrics and verdict)
+    block_index: int | None  # the lease the running block belongs to (None: none runs)
+    setpoint: Setpoint | None  # the operator's teleop setpoint in force (None: none, stale, or its lease gone)
+    commands_rejected: int  # state changes refused since boot: each one answered and counted
+    stale_commands: int  # setpoints the actuator's last guard caught outside the current lease: must stay 0
+
+
+class Crumbs(NamedTuple):
+    """The breadcrumb trail as a reader gets it: copies, oldest first, the newest crumb included (estimate frame)."""
+
+    points: np.ndarray  # (n, 2)
+    times: np.ndarray  # (n,) when each was laid
+    link_good: np.ndarray  # (n,) its link tag
 
 
 class Announcements(NamedTuple):
@@ -164,6 +178,9 @@ class VehiclePort(Protocol):
     def trail_points(self) -> np.ndarray:
         """The breadcrumb trail's points (estimate frame), oldest first: an (n, 2) copy."""
 
+    def crumbs(self) -> Crumbs:
+        """The breadcrumb trail's points, times and link tags (estimate frame), oldest first: copies."""
+
     def linkmap_cells(self) -> list:
         """The owner's link over space, cell by cell (``vehicle.linkmap``), for the file a station fetches."""
 
@@ -176,3 +193,7 @@ class VehiclePort(Protocol):
 
     def drain_reached(self) -> tuple[int, ...]:
         """The plan items reached since the last drain (MISSION_ITEM_REACHED), oldest first; then none."""
+
+    def log(self, since: int = 0) -> tuple[LeaseEvent, ...]:
+        """Every lease transition since boot from the ``since``-th on, oldest first: the record of an observer of the
+        whole run (the simulator's), which draining never empties."""

@@ -50,6 +50,7 @@ class Plant(Protocol):
     hears_last: bool
     rows: list[tuple] | None  # the plant's own per-tick rows (t, true x, true y, est x, est y, ...), or None
     stale: int  # actuations its own audit found outside the lease (the companion's router: frames it forwarded)
+    contingency: Any  # the link-loss baseline (``sim.policies``) its vehicle flies instead of the return plan, or None
 
     @property
     def vehicle(self) -> Core | None:

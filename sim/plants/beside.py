@@ -49,6 +49,7 @@ class CompanionSide:
     ``WORDS`` names the autopilot in the summary; ``FAILURE`` is its run's error."""
 
     leases = True
+    contingency = None  # the companion flies its return plan, never a baseline
     # (the autopilot as the summary's first line names it, where the companion sits, "to X", "X's", the modes)
     WORDS = ("firmware {version}", "telemetry port", "the firmware", "the firmware's", "firmware modes")
     FAILURE: type[Exception] = RuntimeError

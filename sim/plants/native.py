@@ -41,8 +41,8 @@ class NativePlant:
     def __init__(self, scenario: Scenario, kind: str, seed: int, policy: str) -> None:
         self.scenario = scenario
         self.kind = kind
-        self.driver, self.vehicle, self.endpoint = simulated_vehicle(scenario, kind, seed,
-                                                                     contingency=make_policy(check_policy(policy)))
+        self.contingency = make_policy(check_policy(policy))  # None: the return plan flies
+        self.driver, self.vehicle, self.endpoint = simulated_vehicle(scenario, kind, seed, contingency=self.contingency)
         self.world = self.driver.world
         self.robot = self.driver.robot
         # called every tick: bound once (the physics step's three calls are ``SimDriver.advance``'s, made here so
@@ -117,7 +117,7 @@ class NativePlant:
 
     # ----- the record: the loop's trace holds all of it -------------------------------------------------------
     def estimate(self) -> tuple[float, float]:
-        p = self.vehicle.estimator.pose
+        p = self.vehicle.status().pose
         return p.x, p.y
 
     def record(self, t: float, pos: tuple[float, float], link: float, rssi: float) -> None:
