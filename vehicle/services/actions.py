@@ -1,7 +1,7 @@
 """The vehicle's own actions as commands (docs/architecture.md §4): arm, modes, return to launch, return to link.
 
 Every action is a state change under the lease rules: the vehicle decides (``Vehicle.command``, ``rtl``,
-``take_manual``, ``return_now``) and this service answers with what it decided. A mode arrives in the PX4 or the
+``take_manual``) and this service answers with what it decided. A mode arrives in the PX4 or the
 ArduPilot Rover numbering (DO_SET_MODE, the SET_MODE message) or as a standard mode (DO_SET_STANDARD_MODE);
 each means one of three things here: RTL (the operator lease expires), HOLD or MANUAL. A companion computer routes
 these to its autopilot instead of composing this service.
@@ -46,7 +46,7 @@ class VehicleActions(Service):
         # the command service already checked the parameters against link.plan_items.KINDS and filled NaN with
         # "use the parameter" values (command_values), exactly as an uploaded item is
         item = PlanItem(NAV_RETURN_TO_LINK, *p[:5])
-        chk = self.vehicle.return_now((item,), src.sysid, src.compid, t)
+        chk = self.vehicle.rtl(src.sysid, src.compid, t, (item,))
         return answer(self.out, chk, "return to link", src.sysid)
 
     @command(mav.MAV_CMD_DO_SET_MODE)

@@ -1,0 +1,95 @@
+"""The port's three faces (docs/architecture.md §2 "Ports, not a hub"; issue 39): the command authority, the status
+snapshot and the event queue are separate Protocols, each small, and the vehicle provides every member of each with
+the very signature the face declares."""
+
+from __future__ import annotations
+
+import inspect
+
+import numpy as np
+
+from sim.driver import SimDriver
+from sim.scenario import load
+from vehicle.app import Vehicle
+from vehicle.lease import Verdict
+from vehicle.params import load_defaults
+from vehicle.port import CommandAuthority, EventQueue, Snapshot, VehiclePort
+
+FACES = (CommandAuthority, Snapshot, EventQueue)
+MAX_MEMBERS = 12
+OWNER, PLAIN = 255, 245
+
+
+def members(face: type) -> set[str]:
+    """The public members a Protocol declares itself (its methods and properties; not those it inherits)."""
+    return {name for name, value in vars(face).items()
+            if not name.startswith("_") and (callable(value) or isinstance(value, property))}
+
+
+def vehicle() -> Vehicle:
+    sc = load("open")
+    return Vehicle(SimDriver(sc, "rover", np.random.default_rng(1)), load_defaults(), sc.start, 0.0, seed=1)
+
+
+def test_each_face_has_at_most_twelve_public_members_and_no_two_share_one():
+    sizes = {face.__name__: len(members(face)) for face in FACES}
+    assert all(0 < n <= MAX_MEMBERS for n in sizes.values()), sizes
+    names = [name for face in FACES for name in members(face)]
+    assert len(names) == len(set(names))
+
+
+def test_the_whole_port_is_the_three_faces_and_adds_nothing():
+    assert members(VehiclePort) == set()
+    assert all(face in VehiclePort.__mro__ for face in FACES)
+
+
+def test_the_vehicle_provides_every_member_of_every_face_as_declared():
+    v = vehicle()
+    for face in FACES:
+        for name in members(face):
+            declared = vars(face)[name]
+            assert hasattr(v, name), f"{face.__name__}.{name}"
+            if isinstance(declared, property):
+                continue  # (a value: the parameter table is the vehicle's own)
+            provided = getattr(Vehicle, name)
+            assert list(inspect.signature(provided).parameters) == list(inspect.signature(declared).parameters), \
+                f"{face.__name__}.{name}"
+
+
+def test_the_verdict_says_what_autogrant_would_do_without_doing_it():
+    v = vehicle()
+    assert v.verdict(PLAIN).verdict is not Verdict.EXECUTE  # nobody owns it: no lease to act under
+    chk = v.verdict(PLAIN, 190, 0.0)  # as after LEASE_AUTOGRANT: the plain client would act under [E,0]
+    assert chk.verdict is Verdict.EXECUTE and chk.lease is not None
+    assert v.book.owner is None and v.commands_rejected == 0  # nothing granted, nothing counted
+    v.bind_key()  # with a signing key, LEASE_AUTOGRANT does nothing, and the verdict says so
+    assert v.verdict(PLAIN, 190, 0.0).verdict is not Verdict.EXECUTE
+
+
+def test_operator_control_takes_and_gives_up_the_root():
+    v = vehicle()
+    assert v.operator_control(OWNER, 190, 0.0, True, allow_takeover=False).executes and v.book.owner == OWNER
+    assert not v.operator_control(PLAIN, 190, 0.1, False, allow_takeover=False).executes  # not the owner's to give
+    assert v.operator_control(OWNER, 190, 0.2, False, allow_takeover=False).executes and v.book.owner is None
+
+
+def test_the_log_keeps_every_transition_after_the_queue_is_drained():
+    v = vehicle()
+    v.operator_control(OWNER, 190, 0.0, True, allow_takeover=False)
+    drained = v.drain().events
+    assert drained and v.drain().events == ()
+    assert v.log() == drained and v.log(len(drained)) == ()
+    v.rtl(OWNER, 190, 0.5)
+    assert [e.reason.name for e in v.log(len(drained))] == ["OPERATOR_EXPIRE"]
+
+
+def test_the_snapshot_shows_a_teleop_setpoint_and_a_refusal_made_between_two_ticks():
+    v = vehicle()
+    v.operator_control(OWNER, 190, 0.0, True, allow_takeover=False)
+    v.command(OWNER, 190, 0.0, ("arm", True))
+    before = v.status()
+    v.command(OWNER, 190, 0.0, ("teleop", 0.5, 0.0))
+    s = v.status()
+    assert before.setpoint is None and s.setpoint is not None and s.setpoint.sender == OWNER
+    v.refused()
+    assert v.status().commands_rejected == s.commands_rejected + 1
