@@ -4,7 +4,9 @@ the very signature the face declares."""
 
 from __future__ import annotations
 
+import ast
 import inspect
+from pathlib import Path
 
 import numpy as np
 
@@ -18,6 +20,7 @@ from vehicle.port import CommandAuthority, EventQueue, Snapshot, VehiclePort
 FACES = (CommandAuthority, Snapshot, EventQueue)
 MAX_MEMBERS = 12
 OWNER, PLAIN = 255, 245
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def members(face: type) -> set[str]:
@@ -93,3 +96,46 @@ def test_the_snapshot_shows_a_teleop_setpoint_and_a_refusal_made_between_two_tic
     assert before.setpoint is None and s.setpoint is not None and s.setpoint.sender == OWNER
     v.refused()
     assert v.status().commands_rejected == s.commands_rejected + 1
+
+
+# ----- no part writes its owner's fields ------------------------------------------------------------------------
+PARTS = ("vehicle/control.py", "vehicle/contingency.py")  # what a Vehicle is made of, each holding it as ``vehicle``
+MUTATORS = {"append", "extend", "clear", "pop", "remove", "insert", "update", "add", "discard", "popleft"}
+
+
+def _owner(node) -> bool:
+    """``v``, ``vehicle`` or ``self.vehicle``: the vehicle a part holds."""
+    if isinstance(node, ast.Name):
+        return node.id in ("v", "vehicle")
+    return isinstance(node, ast.Attribute) and node.attr == "vehicle" and isinstance(node.value, ast.Name) \
+        and node.value.id == "self"
+
+
+def owner_writes(source: str) -> list[str]:
+    """Assignments to a field of the part's vehicle, and calls that change one in place (``v.notices.append``)."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        targets = node.targets if isinstance(node, ast.Assign) else [node.target] \
+            if isinstance(node, (ast.AugAssign, ast.AnnAssign)) else []
+        found += [f"line {node.lineno}: {ast.unparse(t)} =" for t in targets
+                  if isinstance(t, ast.Attribute) and _owner(t.value)]
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in MUTATORS:
+            held = node.func.value
+            if isinstance(held, ast.Attribute) and _owner(held.value):
+                found.append(f"line {node.lineno}: {ast.unparse(node)}")
+    return found
+
+
+def test_no_part_of_the_vehicle_writes_its_owners_fields():
+    """issue 39: the tick and the return driver read the vehicle and ask it to change (``apply``,
+    ``drop_setpoint``, ``announce``); the vehicle keeps its own clock. None of them sets a field of it."""
+    found = {path: hits for path in PARTS
+             if (hits := owner_writes((ROOT / path).read_text(encoding="utf-8")))}
+    assert found == {}
+
+
+def test_the_owner_write_check_finds_one():
+    source = ("def tick(self, t):\n    v = self.vehicle\n    v.t = t\n    self.vehicle.setpoint = None\n"
+              "    v.notices.append('x')\n    v.apply(out)\n    self.readings = r\n    v.count += 1\n")
+    assert owner_writes(source) == ["line 3: v.t =", "line 4: self.vehicle.setpoint =",
+                                    "line 8: v.count =", "line 5: v.notices.append('x')"]

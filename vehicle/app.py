@@ -47,14 +47,16 @@ class Vehicle(Authority):
     It provides ``vehicle.port.VehiclePort``; nothing outside the core changes its fields."""
 
     def __init__(self, driver: RobotDriver, params: Params, pose: tuple[float, float, float], t: float = 0.0,
-                 seed: int = 0, boot_epoch: int | None = None, contingency: Contingency | None = None) -> None:
+                 seed: int = 0, boot_epoch: int | None = None, contingency: Contingency | None = None,
+                 on_epoch: Callable[[int], str | None] | None = None) -> None:
         """``boot_epoch``: the first epoch to issue, drawn at boot by a real-time vehicle (``vehicle.epochs``);
         None derives it from ``seed``, as only the lockstep simulator may (§3.1). ``contingency``: a link-loss
-        behaviour to fly instead of the return plan (the simulator's baselines)."""
+        behaviour to fly instead of the return plan (the simulator's baselines); ``on_epoch``: told of each epoch
+        issued, before anyone hears of it."""
         self.driver = driver
         self.home = (pose[0], pose[1])
         self.t = t
-        super().__init__(params, seed, contingency, boot_epoch)
+        super().__init__(params, seed, contingency, boot_epoch, on_epoch)
         self.returns = ReturnDriver(self)
         self.control = ControlLoop(self, self.returns, pose, t)
         # the parts' own objects, shared: the estimator, the trail and the plan items reached (MISSION_ITEM_REACHED,
@@ -73,7 +75,9 @@ class Vehicle(Authority):
         """One 50 Hz tick (``ControlLoop.tick``): the speed and yaw rate commanded. A snapshot taken before it
         belongs to the last tick, one taken during it (an injected contingency's) to this one so far."""
         self._ticks += 1
-        out = self.control.tick(t)
+        dt = t - self.t
+        self.t = t
+        out = self.control.tick(t, dt)
         self._ticks += 1
         return out
 

@@ -40,14 +40,16 @@ class Authority:
 
     t: float  # the vehicle's clock: a teleop setpoint lives SETPOINT_TTL from now
 
-    def __init__(self, params: Params, seed: int, contingency: Contingency | None, boot_epoch: int | None) -> None:
+    def __init__(self, params: Params, seed: int, contingency: Contingency | None, boot_epoch: int | None,
+                 on_epoch: Callable[[int], str | None] | None = None) -> None:
         """``boot_epoch``: the first epoch to issue, drawn at boot by a real-time vehicle (``vehicle.epochs``);
         None derives it from ``seed``, as only the lockstep simulator may (§3.1). ``contingency``: a link-loss
-        behaviour to fly instead of the return plan (the simulator's baselines)."""
+        behaviour to fly instead of the return plan (the simulator's baselines). ``on_epoch``: told of each epoch
+        issued, before anyone hears of it (a problem it answers is announced)."""
         self.params = params
         self.seed = seed
         self.contingency = contingency
-        self.on_epoch: Callable[[int], str | None] | None = None  # told of each epoch issued, before its ACK
+        self.on_epoch = on_epoch
         self.book = LeaseBook(LeaseConfig.from_params(params), plan=self._blocks(default_plan(params)),
                               last_epoch=None if boot_epoch is None else epoch_before(boot_epoch))
         self.plan_items: tuple[PlanItem, ...] = ()  # the uploaded return plan (empty: the default plan)
@@ -180,6 +182,11 @@ class Authority:
             return self._reject(chk)
         self._execute(payload, chk.lease, sender)
         return chk
+
+    def drop_setpoint(self) -> None:
+        """The tick found the setpoint spent (stale, its lease gone, a return drives): none drives until the operator
+        sends one."""
+        self.setpoint = None
 
     def _execute(self, payload: tuple, lease: LeaseId | None, sender: int) -> None:
         """What an executed command does: ``("teleop", speed, yaw_rate)``, ``("hold",)`` or ``("arm", on)``."""

@@ -42,10 +42,9 @@ class Onboard(VehiclePort, Protocol):
     ``Contingency`` is outside the core and sees only the port (``VehiclePort``)."""
 
     params: Params
-    book: LeaseBook  # the current book: a transition replaces it, through ``apply`` or directly
+    book: LeaseBook  # the current book: a transition replaces it, through ``apply``
     contingency: Contingency | None  # None: the return plan's blocks drive
     linkmap: LinkMap
-    notices: list[str]  # announced by the endpoint
     armed: bool
     home: tuple[float, float]
     station_heard_at: float | None  # a station other than the owner, last heard (trusted frames only)
@@ -224,7 +223,7 @@ class ReturnDriver:
         v = self.vehicle
         self.faults += 1
         self.service, self.index = None, None
-        v.notices.append(f"return service fault in lease {index}: {type(error).__name__}: {error}; "
+        v.announce(f"return service fault in lease {index}: {type(error).__name__}: {error}; "
                          f"block ended, holding")
         v.apply(v.book.finish(index, ExpireReason.STUCK, t))
         return 0.0, 0.0

@@ -37,6 +37,5 @@ def boot_core(driver: RobotDriver, params: Params, pose: tuple[float, float, flo
     derives the first epoch from ``seed``, as only the lockstep simulator may), told of each epoch it issues
     through ``on_epoch`` before anyone hears of it; ``contingency`` a link-loss behaviour to fly instead of the
     return plan (the simulator's baselines)."""
-    v = Vehicle(driver, params, pose, t, seed=seed, boot_epoch=boot_epoch, contingency=contingency)
-    v.on_epoch = on_epoch
-    return v
+    return Vehicle(driver, params, pose, t, seed=seed, boot_epoch=boot_epoch, contingency=contingency,
+                   on_epoch=on_epoch)
