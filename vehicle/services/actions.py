@@ -12,7 +12,7 @@ from __future__ import annotations
 from link.modes import px4_parts
 from link.plan_items import NAV_RETURN_TO_LINK
 from vehicle.modes import decode_mode
-from vehicle.port import VehiclePort
+from vehicle.port import CommandAuthority
 from vehicle.service import PlanItem
 from vehicle.services.base import Outbox, Reply, Service, Source, command, handles, mav
 from vehicle.services.commands import answer
@@ -26,7 +26,7 @@ ARMED = 0.5  # COMPONENT_ARM_DISARM p1 at or above: arm
 class VehicleActions(Service):
     """Arm, modes and returns, each judged by the lease rules."""
 
-    def __init__(self, out: Outbox, vehicle: VehiclePort) -> None:
+    def __init__(self, out: Outbox, vehicle: CommandAuthority) -> None:
         self.out = out
         self.vehicle = vehicle
 
