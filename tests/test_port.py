@@ -139,3 +139,39 @@ def test_the_owner_write_check_finds_one():
               "    v.notices.append('x')\n    v.apply(out)\n    self.readings = r\n    v.count += 1\n")
     assert owner_writes(source) == ["line 3: v.t =", "line 4: self.vehicle.setpoint =",
                                     "line 8: v.count =", "line 5: v.notices.append('x')"]
+
+
+# ----- the simulator's record reads the vehicle as an observer ------------------------------------------------------
+# what the record, the metrics, the verdict and the plants may not reach into: the core's own parts and fields (the
+# port's reads are status(), params, crumbs(), trail_points(), log() ...)
+CORE_FIELDS = {"control", "returns", "trail", "estimator", "linkmap", "event_log", "events", "notices", "book",
+               "setpoint", "commands_rejected", "armed", "holding", "contingency", "driver", "state", "t"}
+OBSERVERS = ("sim/runner.py", "sim/lease_record.py", "sim/metrics.py", "sim/plants")
+
+
+def core_reads(source: str) -> list[str]:
+    """Reads of a core field through a vehicle (``v.book``, ``run.vehicle.trail``, ``self.vehicle.estimator``), by
+    line."""
+    found: list[tuple[int, str]] = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Attribute) and node.attr in CORE_FIELDS:
+            held = node.value
+            if (isinstance(held, ast.Name) and held.id in ("v", "vehicle")) or \
+                    (isinstance(held, ast.Attribute) and held.attr == "vehicle"):
+                found.append((node.lineno, f"line {node.lineno}: {ast.unparse(node)}"))
+    return [text for _, text in sorted(found)]
+
+
+def test_the_simulators_record_metrics_and_plants_read_only_the_snapshot_and_the_events():
+    """issue 39: the run's trace and audit, the lease record, the §7 figures and verdict, and the plants read a
+    returnlink vehicle through its port: the status snapshot and the event queue's log."""
+    paths = [p for name in OBSERVERS for p in sorted((ROOT / name).rglob("*.py") if (ROOT / name).is_dir()
+                                                     else [ROOT / name])]
+    found = {str(p.relative_to(ROOT)): hits for p in paths if (hits := core_reads(p.read_text(encoding="utf-8")))}
+    assert len(paths) > 5 and found == {}
+
+
+def test_the_core_read_check_finds_one():
+    source = "s = v.status()\nx = v.control.command_out\nlog = run.vehicle.event_log\np = self.vehicle.estimator\n"
+    assert core_reads(source) == ["line 2: v.control", "line 3: run.vehicle.event_log",
+                                  "line 4: self.vehicle.estimator"]
