@@ -101,8 +101,9 @@ class LeaseRecord:
         """What the metrics need of the tick just run: when the owner's link came back, and each new lease event
         (the lease the runner's own audit expects, the losses and the regains)."""
         n_events, heard, was_lost, low = before
-        link = v.status().book.link
-        if was_lost and not link.lost and v.status().book.owner is not None:
+        book = v.status().book
+        link = book.link
+        if was_lost and not link.lost and book.owner is not None:
             self.link_backs.append((t, link.contact_since))
         self._read_log(v)
         if len(self._log) > n_events:
