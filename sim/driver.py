@@ -17,7 +17,8 @@ from sim.robots import Robot, make_robot
 from sim.scenario import Scenario
 from sim.sensors import Sensors
 from sim.world import World
-from vehicle.app import Contingency, Vehicle
+from vehicle.contingency import Contingency
+from vehicle.core import Core, boot_core
 from vehicle.endpoint import Endpoint
 from vehicle.io import Readings
 from vehicle.params import Params, load_defaults, read_parm_file
@@ -55,7 +56,7 @@ class SimDriver:
 
 def simulated_vehicle(scenario: Scenario, kind: str, seed: int, param_file: Path | None = None,
                       boot_epoch: int | None = None, contingency: Contingency | None = None,
-                      **endpoint_options) -> tuple[SimDriver, Vehicle, Endpoint]:
+                      **endpoint_options) -> tuple[SimDriver, Core, Endpoint]:
     """The scenario's robot with the real onboard software on it: boot parameters from ``param_file`` (or the
     defaults; StoredFileError if it is damaged), then the scenario's own, as `sim run` and `sim serve` both start
     it. ``boot_epoch`` None (`sim run`) derives the first epoch from ``seed``; `sim serve` draws one. The robot
@@ -71,5 +72,5 @@ def simulated_vehicle(scenario: Scenario, kind: str, seed: int, param_file: Path
         params.set("RTL_BODY_R", driver.robot.shape.radius)
     for k, v in scenario.params.items():
         params.set(k, v)
-    vehicle = Vehicle(driver, params, scenario.start, 0.0, seed=seed, boot_epoch=boot_epoch, contingency=contingency)
+    vehicle = boot_core(driver, params, scenario.start, 0.0, seed=seed, boot_epoch=boot_epoch, contingency=contingency)
     return driver, vehicle, Endpoint(vehicle, param_file=param_file, **endpoint_options)

@@ -20,7 +20,7 @@ from link.transports import UdpTransport
 from sim.driver import simulated_vehicle
 from sim.plots import draw_trail, draw_world, plt, save
 from sim.scenario import Scenario
-from vehicle.app import DT, run
+from vehicle.core import DT, run
 from vehicle.epochs import EpochLog
 from vehicle.keystore import KeyStore
 

@@ -88,9 +88,10 @@ class CompanionServer(FirmwareServer):
         v = self.companion.vehicle
         if v is None:
             return "  companion booting"
-        cur = v.book.current
+        s = v.status()
+        cur = s.book.current
         holder = "none" if cur is None else cur.holder.name.lower()
-        return f"  lease {_STATE_NAMES.get(v.state(), '?')} ({holder})"
+        return f"  lease {_STATE_NAMES.get(s.state, '?')} ({holder})"
 
     def run(self) -> CompanionServer:
         try:

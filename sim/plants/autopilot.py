@@ -33,6 +33,7 @@ class AutopilotPlant:
     leases = False
     vehicle = None  # no returnlink aboard
     stale = 0  # no lease to audit against
+    contingency = None  # no returnlink aboard, so no baseline flown in its place
 
     kind: str
     policies: tuple[str, ...]
