@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from vehicle.companion import px4
+from vehicle.companion.governor import governed
 from vehicle.companion.ranges import KINDS as RANGE_KINDS
 from vehicle.companion.ranges import RangeSensors
 from vehicle.io import Fix, Readings
@@ -68,6 +69,7 @@ GCS_SYSID_PARAMS = ("MAV_GCS_SYSID", "SYSID_MYGCS")  # ArduPilot 4.7+, and befor
 CREEP = 0.3  # m/s: a rover that steers like a car turns "in place" by creeping, or it never turns at all
 EKF_POS_HORIZ_REL, EKF_POS_HORIZ_ABS = 8, 16
 STANDING = 0.1  # m/s: the autopilot's estimate says the rover stands below this
+SLOWING = 0.3  # m/s: a command this much slower than the last target's is sent at once
 BRAKE_MAX_S = 5.0  # s: zero targets at most this long before HOLD anyway (a rover on a slope, a noisy estimate)
 
 
@@ -165,6 +167,7 @@ class Observed:
     armed: bool = False
     heard: float | None = None  # when the autopilot's last frame arrived
     position: tuple[float, float, float, float, float] | None = None  # (t, x, y, vx, vy)
+    before: tuple[float, float, float, float, float] | None = None  # the estimate before ``position``
     attitude: tuple[float, float, float] | None = None  # (t, yaw, yaw rate)
     fix_type: int = 0
     h_acc: float | None = None  # m, from GPS_RAW_INT
@@ -237,6 +240,7 @@ class AutopilotDriver:
         self.last_position_read: float | None = None
         self.last_attitude_read: float | None = None
         self.keepalives = 0  # sent, for the record
+        self.sent_command = 0.0  # the speed command the last target carried (before ``governed``)
         self.braking_since: float | None = None  # released to HOLD, streaming zero targets until the rover stands
         self.ranges = RangeSensors()  # the rover's range data, heard from any component of the autopilot's system
 
@@ -263,7 +267,7 @@ class AutopilotDriver:
             return
         s.heard = t
         if kind == "LOCAL_POSITION_NED":
-            s.position = (t, m.x, m.y, m.vx, m.vy)
+            s.before, s.position = s.position, (t, m.x, m.y, m.vx, m.vy)
             s.position_times.append(t)
         elif kind == "ATTITUDE":
             s.attitude = (t, m.yaw, m.yawspeed)
@@ -371,6 +375,18 @@ class AutopilotDriver:
             else:
                 self._ask(self.rules.hold, t)
 
+    def speed_along(self, t: float) -> tuple[float, float] | None:
+        """The rover's speed along its heading (m/s, negative backward) and its rate of change (m/s/s, over the last
+        two estimates) from the autopilot's fresh estimate, or None (none fresh)."""
+        pos, before, att = self.seen.position, self.seen.before, self.seen.attitude
+        if pos is None or t - pos[0] > STALE or att is None:
+            return None
+        c, s = math.cos(att[1]), math.sin(att[1])
+        v = pos[3] * c + pos[4] * s
+        if before is None or not 0.0 < pos[0] - before[0] <= STALE:
+            return v, 0.0
+        return v, (v - (before[3] * c + before[4] * s)) / (pos[0] - before[0])
+
     def standing(self, t: float) -> bool:
         """The autopilot's fresh estimate says the rover stands (below STANDING)."""
         pos = self.seen.position
@@ -440,9 +456,11 @@ class AutopilotDriver:
         elif s.mode is not None and (self.confirmed or not self._unconfirmed_ok(s.mode)):
             return f"the autopilot switched to {self.mode_name(s.mode)}, not by the companion: return ended"
         streaming = s.mode == r.drive or r.lead is not None  # PX4: the stream runs before, and into, Offboard
-        if streaming and t >= self.next_target:
+        # a command to slow down (the approach speed, heard again) goes out at once, not up to a period later
+        slowing = abs(self.command_out[0]) < abs(self.sent_command) - SLOWING
+        if streaming and (t >= self.next_target or slowing):
             self.next_target = t + TARGET_PERIOD
-            self._target()
+            self._target(t)
         if self.switch_at is not None and t >= self.switch_at:
             self.switch_at = None
             self._ask(r.drive, t)
@@ -460,14 +478,18 @@ class AutopilotDriver:
         """``mode`` as the autopilot driven names it."""
         return self.rules.mode_name(mode)
 
-    def _target(self) -> None:
+    def _target(self, t: float) -> None:
         """One velocity + turn-rate target in the body frame (position, acceleration and yaw ignored; PX4: a speed
-        and a bearing, ``px4.velocity_target``)."""
+        and a bearing, ``px4.velocity_target``). ArduPilot's speed is ``governed``: its speed loop's overshoot,
+        measured, is taken off the target."""
         assert self.enc is not None
         speed, yaw_rate = self.command_out
+        self.sent_command = speed
         if self.rules is PX4Rules:
             self._px4_target(speed, yaw_rate)
             return
+        along = self.speed_along(t)
+        speed = speed if along is None else governed(speed, *along)
         if not self.pivots and abs(speed) < 0.05 and abs(yaw_rate) > 0.05:
             speed = CREEP * self.direction
         mask = 0b0000_0101_1100_0111  # ignore x y z, ax ay az, yaw: use vx vy vz and yaw rate
