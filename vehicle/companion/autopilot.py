@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from vehicle.companion import px4
-from vehicle.companion.governor import governed
+from vehicle.companion.governor import Governor
 from vehicle.companion.ranges import KINDS as RANGE_KINDS
 from vehicle.companion.ranges import RangeSensors
 from vehicle.io import Fix, Readings
@@ -240,7 +240,8 @@ class AutopilotDriver:
         self.last_position_read: float | None = None
         self.last_attitude_read: float | None = None
         self.keepalives = 0  # sent, for the record
-        self.sent_command = 0.0  # the speed command the last target carried (before ``governed``)
+        self.governor = Governor()  # ArduPilot's speed targets, its loop's overshoot taken off
+        self.sent_command = 0.0  # the speed command the last target carried (before the governor)
         self.braking_since: float | None = None  # released to HOLD, streaming zero targets until the rover stands
         self.ranges = RangeSensors()  # the rover's range data, heard from any component of the autopilot's system
 
@@ -480,8 +481,8 @@ class AutopilotDriver:
 
     def _target(self, t: float) -> None:
         """One velocity + turn-rate target in the body frame (position, acceleration and yaw ignored; PX4: a speed
-        and a bearing, ``px4.velocity_target``). ArduPilot's speed is ``governed``: its speed loop's overshoot,
-        measured, is taken off the target."""
+        and a bearing, ``px4.velocity_target``). ArduPilot's speed is governed (``Governor``): its speed loop's
+        overshoot, foreseen, is taken off the target."""
         assert self.enc is not None
         speed, yaw_rate = self.command_out
         self.sent_command = speed
@@ -489,7 +490,7 @@ class AutopilotDriver:
             self._px4_target(speed, yaw_rate)
             return
         along = self.speed_along(t)
-        speed = speed if along is None else governed(speed, *along)
+        speed = speed if along is None else self.governor.target(speed, *along)
         if not self.pivots and abs(speed) < 0.05 and abs(yaw_rate) > 0.05:
             speed = CREEP * self.direction
         mask = 0b0000_0101_1100_0111  # ignore x y z, ax ay az, yaw: use vx vy vz and yaw rate

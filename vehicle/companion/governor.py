@@ -8,9 +8,13 @@ into the range 0.4 m/s faster than it was driven out, and the firmware's deceler
 1 m/s/s) turned the excess into metres past the place the link came back. The steady speed is right (2.00 for
 2.00), so no fixed scale would do: the companion foresees the overshoot from the autopilot's own estimate (the
 speed and its rate of change, LEAD s ahead: the loop's lag) and takes GAIN times the foreseen excess off the
-target (``governed``). Measured beside the SITL's physics (tests/test_companion_stop.py): the return's peak
-2.45 m/s for 2.0 without it; 2.27-2.28 with the excess taken off only once it was there (gain 2 and 3); 2.07-2.10
-foreseen 0.3 s ahead, 2.03-2.06 foreseen 0.5 s ahead (three runs each), against 2.01 driven out on that stretch.
+target (``Governor``). Measured beside the SITL's physics (tests/test_companion_stop.py): the return's peak
+2.45 m/s for 2.0 without it; 2.21-2.28 with the excess taken off only once the speed had passed the command
+(one run each: gain 2, gain 3, and with what it still gained; leading the target by at most 0.3 m/s from below:
+2.26); 2.02-2.06 foreseen 0.5 s ahead from below (six runs), against 2.01 driven out on that stretch. Foresight
+from below cannot tell an overshoot coming from a loop that stops at its target (a stand-in that follows its
+target at 3 m/s/s was held under the command, braking and driving in turn), so the governor drops it for the
+autopilot that shows it needs none: a lowered target and the rover at once slowing below the command.
 Where the speed is at or below the command the target is the command unchanged, so steady driving is as asked,
 and slowing down (the approach speed, the brake) is only made firmer. What it cannot change is the firmware's
 deceleration limit: from the outbound 2 m/s the stop after the first owner packet takes about 2 m whatever the
@@ -19,23 +23,40 @@ companion asks for (v^2 / 2a), plus the loop's reaction.
 
 from __future__ import annotations
 
-import math
+from dataclasses import dataclass
 
-GAIN = 3.0  # target lowered by this many m/s per m/s of measured excess
+GAIN = 3.0  # target lowered by this many m/s per m/s of excess
 LEAD = 0.5  # s: the excess foreseen this far ahead (the speed loop's lag behind its target)
 MOVING = 0.05  # m/s: a command below this is a stop or a turn on the spot, sent as it is
 
 
-def governed(command: float, measured: float, accel: float = 0.0, gain: float = GAIN, lead: float = LEAD) -> float:
-    """The speed target (m/s, signed: negative is backward) for the vehicle's ``command`` when the autopilot's fresh
-    estimate says the rover goes ``measured`` along its heading, its speed changing at ``accel``: the excess is the
-    one ``lead`` s ahead. Never past zero: a governed target slows the rover, it never reverses it."""
-    if abs(command) < MOVING or measured * command <= 0.0:
-        return command
-    ahead = measured + accel * lead
-    if ahead * command <= 0.0:
-        return command
-    excess = abs(ahead) - abs(command)
-    if excess <= 0.0:
-        return command
-    return math.copysign(max(0.0, abs(command) - gain * excess), command)
+@dataclass
+class Governor:
+    """The speed targets for one autopilot (see the module docstring). ``foresee``: whether an excess is still
+    foreseen from below the command. It is, until the autopilot shows its loop needs no foresight: a target
+    lowered for an excess foreseen, and the rover at once slowing below the command (a loop that follows its target
+    without lag, which foresight would hold under the command, braking and driving in turn)."""
+
+    foresee: bool = True
+    lowered: bool = False  # the last target was lowered for an excess foreseen from below
+
+    def target(self, command: float, measured: float, accel: float = 0.0) -> float:
+        """The speed target (m/s, signed: negative is backward) for the vehicle's ``command`` when the autopilot's
+        fresh estimate says the rover goes ``measured`` along its heading, its speed changing at ``accel`` (m/s/s).
+        Never past zero: a governed target slows the rover, it never reverses it."""
+        if abs(command) < MOVING:
+            self.lowered = False
+            return command
+        sign = 1.0 if command > 0.0 else -1.0
+        speed, gaining = measured * sign, accel * sign  # along the command: negative is the other way
+        excess = speed - abs(command)
+        if self.lowered and excess < 0.0 and gaining < 0.0:
+            self.foresee = False
+        self.lowered = False
+        if speed <= 0.0 or (excess < 0.0 and not self.foresee):
+            return command
+        foreseen = excess + max(0.0, gaining) * LEAD
+        if foreseen <= 0.0:
+            return command
+        self.lowered = excess <= 0.0
+        return sign * max(0.0, abs(command) - GAIN * foreseen)
