@@ -34,8 +34,7 @@ SECTION = "To try it on a desk with the SITL firmware"
 # RTL_APPROACH_SPD at the first packet heard again, LINK_REGAINED comes over the regain window, the companion
 # brakes with zero targets before HOLD, and its speed targets carry no overshoot of the firmware's speed loop
 # (``vehicle.companion.governor``). Measured: 2.6 m inside (17.4 m from home, one run); before the governor 2.8 m
-# inside; before the approach speed
-# and the brake 6.0, 6.1 and 6.2 m inside, HOLD rolling the rover on.
+# inside; before the approach speed and the brake 6.0, 6.1 and 6.2 m inside, HOLD rolling the rover on.
 WITHIN_M = 3.0
 
 
