@@ -43,6 +43,15 @@ def test_a_loop_that_follows_its_target_at_once_is_left_alone_after_one_lowered_
     assert g.target(1.0, 1.2) == pytest.approx(1.0 - GAIN * 0.2)
 
 
+def test_a_dip_of_the_speed_near_the_command_keeps_the_foresight():
+    """Steady at the command, the estimate's noise lowers a target now and then: the speed dipping a few cm/s after
+    it is not a loop without lag, and the next overshoot is still foreseen."""
+    g = Governor()
+    assert g.target(2.0, 1.98, accel=0.4) < 2.0
+    assert g.target(2.0, 1.95, accel=-0.3) == 2.0
+    assert g.foresee
+
+
 def test_the_target_never_reverses_the_rover():
     g = Governor()
     assert g.target(1.0, 2.5) == 0.0  # the approach speed from 2.5 m/s: a stop, never backward

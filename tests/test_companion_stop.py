@@ -9,13 +9,13 @@ Measured before the brake and the approach speed: LINK_REGAINED 2.5 m inside the
 overshoots the 2.0 m/s asked for after the return's start from rest: 2.45 m/s), slowed by the firmware's own
 deceleration limit, braked by zero targets: at rest 2.8-2.9 m inside (15.08, 15.19, 15.11, 15.17 m from home).
 With the overshoot foreseen and taken off the targets (``vehicle.companion.governor``) the return's peak is
-2.02-2.06 m/s against 2.01 driven out on that stretch, and it rests 15.52, 15.50, 15.58 m from home (2.42-2.50 m
-inside; 15.31, 15.23, 15.51 with a governor that foresaw from below without ever dropping its foresight, and 15.69,
-15.37, 15.51 with it foreseeing 0.3 s ahead instead of 0.5). What is left is the
-firmware's deceleration (about 1 m/s/s: some 2 m from 2 m/s) and the loop's reaction, about 0.5 s from the
-first packet heard to a falling speed: the rest varies with when the first owner packet falls in the 10 Hz loops,
-more than the governor moves it (checked once with the governor taken out on this tree: back at 2.42 m/s, the
-speed check failed, at rest 15.40 m from home).
+2.02-2.06 m/s against 2.01 driven out on that stretch, and it rests 15.31, 15.65, 15.79 m from home (2.21-2.69 m
+inside; 15.52, 15.50, 15.58, 15.58 before the governor kept its foresight through a dip of a few cm/s; 15.31,
+15.23, 15.51 when it never dropped its foresight, and 15.69, 15.37, 15.51 foreseeing 0.3 s ahead instead of 0.5).
+What is left is the firmware's deceleration (about 1 m/s/s: some 2 m from 2 m/s) and the loop's reaction, about
+0.5 s from the first packet heard to a falling speed: the rest varies with when the first owner packet falls in
+the 10 Hz loops, more than the governor moves it (checked once with the governor taken out on this tree: back at
+2.42 m/s, the speed check failed, at rest 15.40 m from home).
 One firmware per test, on its own instance, stopped by its pid."""
 
 from __future__ import annotations

@@ -11,10 +11,10 @@ speed and its rate of change, LEAD s ahead: the loop's lag) and takes GAIN times
 target (``Governor``). Measured beside the SITL's physics (tests/test_companion_stop.py): the return's peak
 2.45 m/s for 2.0 without it; 2.21-2.28 with the excess taken off only once the speed had passed the command
 (one run each: gain 2, gain 3, and with what it still gained; leading the target by at most 0.3 m/s from below:
-2.26); 2.02-2.06 foreseen 0.5 s ahead from below (six runs), against 2.01 driven out on that stretch. Foresight
+2.26); 2.02-2.06 foreseen 0.5 s ahead from below (ten runs), against 2.01 driven out on that stretch. Foresight
 from below cannot tell an overshoot coming from a loop that stops at its target (a stand-in that follows its
 target at 3 m/s/s was held under the command, braking and driving in turn), so the governor drops it for the
-autopilot that shows it needs none: a lowered target and the rover at once slowing below the command.
+autopilot that shows it needs none: a lowered target and the rover at once slowing, well below the command.
 Where the speed is at or below the command the target is the command unchanged, so steady driving is as asked,
 and slowing down (the approach speed, the brake) is only made firmer. What it cannot change is the firmware's
 deceleration limit: from the outbound 2 m/s the stop after the first owner packet takes about 2 m whatever the
@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 GAIN = 3.0  # target lowered by this many m/s per m/s of excess
 LEAD = 0.5  # s: the excess foreseen this far ahead (the speed loop's lag behind its target)
+FELL = 0.2  # m/s: a rover this far below its command, and slowing, after a lowered target has a loop without lag
 MOVING = 0.05  # m/s: a command below this is a stop or a turn on the spot, sent as it is
 
 
@@ -34,8 +35,9 @@ MOVING = 0.05  # m/s: a command below this is a stop or a turn on the spot, sent
 class Governor:
     """The speed targets for one autopilot (see the module docstring). ``foresee``: whether an excess is still
     foreseen from below the command. It is, until the autopilot shows its loop needs no foresight: a target
-    lowered for an excess foreseen, and the rover at once slowing below the command (a loop that follows its target
-    without lag, which foresight would hold under the command, braking and driving in turn)."""
+    lowered for an excess foreseen, and the rover at once slowing, FELL below the command (a loop that follows its
+    target without lag, which foresight would hold under the command, braking and driving in turn; a dip of a few
+    cm/s is the estimate's noise)."""
 
     foresee: bool = True
     lowered: bool = False  # the last target was lowered for an excess foreseen from below
@@ -50,7 +52,7 @@ class Governor:
         sign = 1.0 if command > 0.0 else -1.0
         speed, gaining = measured * sign, accel * sign  # along the command: negative is the other way
         excess = speed - abs(command)
-        if self.lowered and excess < 0.0 and gaining < 0.0:
+        if self.lowered and excess < -FELL and gaining < 0.0:
             self.foresee = False
         self.lowered = False
         if speed <= 0.0 or (excess < 0.0 and not self.foresee):
