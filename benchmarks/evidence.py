@@ -189,9 +189,10 @@ def seek_table(rows: list[dict], split: list[str]) -> str:
                     continue
                 ttl = ttl_values(rs)
                 times = " / ".join(seconds(p(ttl, q), 1) for q in (50, 90, 95))
+                times += "" if times.endswith("never") else " s"  # (seconds, unless the P95 trial never regained)
                 rest = mean(rests(rs))
                 label = _label(pol, json.loads(value)) if pol in split else pol
-                lines.append(f"| {robot} | {label} | {times} s | {'-' if rest is None else f'{rest:.1f} m'} | "
+                lines.append(f"| {robot} | {label} | {times} | {'-' if rest is None else f'{rest:.1f} m'} | "
                              f"{contacts(rs)} |")
     return "\n".join(lines)
 
