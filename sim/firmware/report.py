@@ -3,7 +3,7 @@ firmware's mode, with the loss and rest points and the EKF's path) and what the 
 timeline against the radio link and the distance driven back). A companion run's return is its return-service
 lease, which drives in GUIDED: that is what its pictures mark as the return.
 
-``run`` is a ``sim.runner.Run`` of a firmware plant, or a ``sim serve`` server of one (``sim.firmware.serve``): both
+``run`` is a ``sim.runner.Run`` of a firmware plant, or a ``sim serve`` server of one (``sim.serve.Server``): both
 have the plant (``run.plant``: its rows, its link, the times it heard its station), the world and the scenario. A
 run of PX4 (``sim.plants.px4``) has the same record; its plant names its modes (``mode_names``, ``return_modes``,
 ``autopilot``), which default to ArduPilot's."""

@@ -139,6 +139,15 @@ class AutopilotPlant:
     def radio_status(self, state: LinkState, t: float) -> None:
         """The autopilot reads no RADIO_STATUS of its own link here: its failsafe hears the radio's frames."""
 
+    def replies(self) -> list[bytes]:
+        """Nothing between ticks: what was received went to the autopilot at once, which answers in its own time
+        (its frames leave with the next tick's)."""
+        return []
+
+    def pinned(self) -> list:
+        """No address to keep: the autopilot keeps its own ground stations."""
+        return []
+
     # ----- the record ----------------------------------------------------------------------------------------
     def estimate(self) -> tuple[float, float]:
         return self._autopilot_estimate()
@@ -151,8 +160,14 @@ class AutopilotPlant:
                           self.world.collisions))
 
     def status(self) -> str:
-        mode = self.link.tap.mode
-        return f"  {'?' if mode is None else self._mode_name(mode):<12}"
+        """The autopilot's mode and whether it is armed."""
+        tap = self.link.tap
+        mode = "?" if tap.mode is None else self._mode_name(tap.mode)
+        return f"  {mode:<12} {'armed' if tap.armed else 'disarmed'}"
+
+    def started(self) -> str:
+        """The autopilot's version and how long it took to boot."""
+        return f"{self.link.tap.version or self.autopilot} ready after {self.link.boot_s:.1f} simulated s"
 
     # ----- the figures ---------------------------------------------------------------------------------------
     @property
