@@ -29,6 +29,7 @@ from __future__ import annotations
 import bisect
 import math
 
+from sim.compare import Repeatability
 from sim.firmware.lockstep import MODE_NAMES
 from sim.firmware.operator import GUIDED, RETURN_MODES, RTL, SMART_RTL
 from sim.metrics import FRAMES, KEYS, REGAIN_MOVED_M, point, rounded
@@ -225,7 +226,7 @@ def summary(run, m: dict) -> str:
 # last DO_CHANGE_SPEED got through before the link died, and the outcome after the loss can then differ by much
 # more than the tick (measured, tunnel, 100 s, three runs in one process: SmartRTL came home at 1.59 m/s twice and
 # at 1.04 m/s once, 7 m short of home when the run ended). What stays within this tolerance run to run is the
-# drive until the loss; ``differing`` names the metrics beyond it rather than calling two runs equal.
+# drive until the loss; ``sim.compare.differing`` names the metrics beyond it rather than calling two runs equal.
 TOLERANCE = {"s": 0.2, "m": 1.0, "count": 2, "mps": 0.1, "quality": 0.15,
              # a mode change the operator asked for and the firmware had not yet shown is asked again a second later
              # (sim/firmware/operator.py RETRY_S): a frame a tick late moves it by that second
@@ -235,7 +236,10 @@ TOLERANCE = {"s": 0.2, "m": 1.0, "count": 2, "mps": 0.1, "quality": 0.15,
              "refusals": 5}
 
 
-def _tolerance(key: str) -> float:
+def _tolerance(key: str, metric: str) -> float:
+    """How far figure ``key`` (of metric ``metric``) may move between two runs of one firmware trial."""
+    if metric == "firmware_modes" and key == "t":
+        return TOLERANCE["mode_s"]
     if key.endswith("_s") or key == "t":
         return TOLERANCE["s"]
     if key.endswith("_mps"):
@@ -253,35 +257,7 @@ def _tolerance(key: str) -> float:
     return 0.0
 
 
-def _close(key: str, a, b) -> bool:
-    """Whether two values of metric ``key`` are the same within the firmware's repeatability: numbers within the
-    key's tolerance, tables and lists element by element, the mode timeline mode by mode, anything else exactly."""
-    if key == "firmware_modes" and isinstance(a, list) and isinstance(b, list):
-        return _same_modes(a, b)
-    if _exact(a) or _exact(b):
-        return a == b
-    if isinstance(a, (int, float)) and isinstance(b, (int, float)):
-        return abs(a - b) <= _tolerance(key) + 1e-9
-    if isinstance(a, dict) and isinstance(b, dict):
-        return a.keys() == b.keys() and all(_close(k, a[k], b[k]) for k in a)
-    if isinstance(a, list) and isinstance(b, list):
-        return len(a) == len(b) and all(_close(key, x, y) for x, y in zip(a, b, strict=True))
-    return a == b
-
-
-def _exact(x) -> bool:
-    """A value compared exactly: a flag, a name or a missing figure."""
-    return isinstance(x, (bool, str)) or x is None
-
-
-def _same_modes(a: list, b: list) -> bool:
-    """The same modes in the same order, each switch within ``TOLERANCE["mode_s"]``."""
-    return ([x.get("mode") for x in a] == [x.get("mode") for x in b]
-            and all(abs(x["t"] - y["t"]) <= TOLERANCE["mode_s"] + 1e-9 for x, y in zip(a, b, strict=True)))
-
-
-def differing(a: dict, b: dict) -> list[str]:
-    """The metrics of two runs of one firmware trial that differ by more than the firmware's own repeatability
-    (``TOLERANCE``); ``real_time_factor`` and the verdict's wording (which quotes counts) are left out."""
-    skip = {"real_time_factor", "failures", "passed"}
-    return [k for k in sorted(set(a) | set(b)) if k not in skip and not _close(k, a.get(k), b.get(k))]
+# What a run of a real autopilot repeats (``sim.compare.differing``): each figure within ``TOLERANCE``, the mode
+# timeline mode by mode with each switch within ``TOLERANCE["mode_s"]``; the real-time factor and the verdict's
+# wording (which quotes counts) are left out
+REPEATABILITY = Repeatability(_tolerance, frozenset({"real_time_factor", "failures", "passed"}), exact=False)

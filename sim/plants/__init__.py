@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from link.radio import LinkState
+from sim.compare import Repeatability
 from sim.robots import Robot
 from sim.scenario import Event, Station
 from sim.world import World
@@ -53,6 +54,7 @@ class Plant(Protocol):
     hears_last: bool
     rows: list[tuple] | None  # the plant's own per-tick rows (t, true x, true y, est x, est y, ...), or None
     stale: int  # actuations its own audit found outside the lease (the companion's router: frames it forwarded)
+    repeatability: Repeatability  # how far two runs of one trial may differ (``sim.compare``; exact for a native one)
 
     @property
     def vehicle(self) -> Vehicle | None:

@@ -33,6 +33,7 @@ class AutopilotPlant:
     leases = False
     vehicle = None  # no returnlink aboard
     stale = 0  # no lease to audit against
+    repeatability = metrics.REPEATABILITY  # within the autopilot's own determinism (its threads, its timing)
 
     kind: str
     policies: tuple[str, ...]
