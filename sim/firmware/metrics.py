@@ -194,31 +194,6 @@ def _estimator_rmse(rows: list) -> float | None:
     return math.sqrt(sum((a - c) ** 2 + (b - d) ** 2 for a, b, c, d in est) / len(est)) if est else None
 
 
-def summary(run, m: dict) -> str:
-    def f(x, unit="", nd=1):
-        return "-" if x is None else f"{x:.{nd}f}{unit}"
-
-    lines = [
-        f"returnlink sim run {m['scenario']} --vehicle {m['vehicle']} --seed {m['seed']} --policy {m['policy']}",
-        f"  firmware {m['firmware']} (booted in {run.plant.link.boot_s:.1f} simulated s before scenario time 0)",
-        f"  simulated {f(m['sim_duration_s'], ' s')} at {f(m['real_time_factor'], 'x real time')}",
-        f"  link lost at {f(m['link_lost_s'], ' s')}, firmware return began {f(m['return_started_s'], ' s')}"
-        f" (reaction {f(m['reaction_latency_s'], ' s', 3)} after LNK_TIMEOUT)",
-        f"  link regained at {f(m['link_regained_s'], ' s')}; drove {f(m['distance_back_m'], ' m')} back,"
-        f" max displacement {f(m['max_displacement_m'], ' m')}, home error {f(m['final_target_error_m'], ' m', 2)}",
-        f"  loss at {m['loss_position']}, at rest at {m['rest_position']}"
-        f" (delivery {f(m['rest_link_quality'], '', 2)}), link regained by {m['regained_by'] or '-'},"
-        f" {m['link_cycles']} failsafe return{'' if m['link_cycles'] == 1 else 's'} (true frame)",
-        f"  collisions {m['collisions']} ({m['collisions_during_return']} during returns), commands rejected"
-        f" {m['commands_rejected']}, EKF RMSE {f(m['estimator_rmse_m'], ' m', 2)}",
-        "  firmware modes:",
-    ]
-    lines += [f"    {e['t']:7.2f} s  {e['mode']}" for e in m["firmware_modes"]]
-    lines += [f"  note: {n}" for n in run.notes]
-    lines.append("  PASSED" if m["passed"] else "  FAILED: " + "; ".join(m["failures"]))
-    return "\n".join(lines)
-
-
 # How far two runs of the same trial may differ and still count as the same. A firmware run is repeatable only
 # within the firmware's own determinism: ArduPilot SITL runs some work on threads of its own (its IO thread, where
 # SmartRTL also simplifies its path), so under a busy CPU a frame can leave it one 20 ms tick later than in another

@@ -19,6 +19,7 @@ from sim.firmware import metrics
 from sim.jams import RADIO_EVENTS
 from sim.robots import make_robot
 from sim.scenario import Event, Scenario
+from sim.summary import summary
 
 DT = 0.02  # the loop's tick (sim.plants.native.TICK_RATE): what moves around the autopilot moves at this pace
 
@@ -180,7 +181,9 @@ class AutopilotPlant:
         return metrics.figures(run)
 
     def summary(self, run, m: dict) -> str:
-        return metrics.summary(run, m)
+        """The one summary, with the autopilot's version and boot under its first line."""
+        return summary(run, m, [f"  firmware {m['firmware']} (booted in {self.link.boot_s:.1f} simulated s before "
+                                "scenario time 0)"])
 
     @staticmethod
     def pictures(run, out: Path) -> list[Path]:

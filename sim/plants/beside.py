@@ -24,6 +24,7 @@ from link.storage import remove_leftovers
 from sim import metrics
 from sim.plants.lidar import Lidar
 from sim.scenario import Event
+from sim.summary import summary
 from vehicle.companion import router
 from vehicle.companion.app import Companion
 from vehicle.companion.ranges import KINDS as RANGE_KINDS
@@ -202,14 +203,11 @@ class CompanionSide:
 
     def summary(self, run, m: dict) -> str:
         """The native summary, with the autopilot, what the companion passed and refused, and its modes."""
-        lines = metrics.summary(run, m).splitlines()
         c = self.companion.counters
         name, where, to, its, modes_title = self.WORDS
-        extra = [f"  {name.format(version=m['firmware'])} (booted in {self.link.boot_s:.1f} simulated s before "
+        about = [f"  {name.format(version=m['firmware'])} (booted in {self.link.boot_s:.1f} simulated s before "
                  f"scenario time 0), returnlink companion on its {where}",
                  f"  the companion forwarded {c['forwarded']} ground frames to {to}, refused {c['refused']}, "
                  f"relayed {c['relayed']} of {its} to the ground; keepalives {self.companion.driver.keepalives}",
                  f"  {self.range_words()}"]
-        modes = [f"  {modes_title}:"] + [f"    {e['t']:7.2f} s  {e['mode']}" for e in m["firmware_modes"]]
-        notes = [f"  note: {n}" for n in run.notes]
-        return "\n".join([lines[0], *extra, *lines[1:-1], *modes, *notes, lines[-1]])
+        return summary(run, m, about, modes_title)

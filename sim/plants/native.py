@@ -19,10 +19,11 @@ from gcs.station import GroundStation
 from link.radio import LinkState
 from sim.compare import EXACT
 from sim.driver import simulated_vehicle
-from sim.metrics import lease_figures, summary
+from sim.metrics import lease_figures
 from sim.operator import Operator
 from sim.policies import check_policy, make_policy
 from sim.scenario import Event, Scenario, Station
+from sim.summary import summary
 from vehicle.app import DT
 
 # Tick k is at k / TICK_RATE s: the double nearest k * DT, which is what rounding the running sum to 9 decimals
