@@ -28,14 +28,11 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-import numpy as np
-
 from link.proxy import RadioProxy
 from link.radio import Radio
 from link.signing import stamp_from_unix
 from link.transports import UdpTransport
 from sim.plants import Plant
-from sim.plots import draw_trail, draw_world, plt, save
 from sim.policies import DEFAULT_POLICY
 from sim.runner import frozen, plant_for
 from sim.scenario import Scenario
@@ -117,8 +114,13 @@ class Server:
                                 lambda: self.robot.pose[:2])
         self.t = 0.0
         self.ticks = 0
-        # (true x, true y, estimated x, estimated y), every PATH_EVERY ticks, in the true frame
+        # (true x, true y, estimated x, estimated y), every PATH_EVERY ticks, in the true frame: the trajectory's
+        # path where the plant keeps no rows of its own; a served run keeps no lease record (``sim.report.Run``)
         self.path: list[tuple[float, float, float, float]] = []
+        self.trace = None
+        self.blocks: list = []
+        self.losses: list = []
+        self.link_backs: list = []
         self._out = None
         self._report_every = 5.0
         self._next_report = 0.0
@@ -235,19 +237,3 @@ class Server:
             quality = "perfect" if state is None else f"{state.rssi_dbm:6.1f} dBm, delivery {state.delivery:4.2f}"
             print(f"t={t:7.1f} s{plant.status()}  pos ({x:6.1f}, {y:6.1f})  link {quality}", file=self._out,
                   flush=True)
-
-    # ----- the picture ---------------------------------------------------------------------------------------
-    def plot(self, path: Path) -> Path:
-        fig, ax = plt.subplots(figsize=(9, 7))
-        draw_world(ax, self.world, self.scenario.bounds)
-        if self.path:
-            p = np.array(self.path)
-            ax.plot(p[:, 1], p[:, 0], color="k", lw=0.9, alpha=0.55, label="true path")
-            ax.plot(p[:, 3], p[:, 2], color="tab:orange", lw=0.9, label="estimated path")
-        v = self.vehicle
-        if v is not None:
-            # the crumbs in the vehicle's frame, moved into the true one
-            draw_trail(ax, v.trail.points() + np.array(self.plant.frame_offset), v.trail.link_good())
-        ax.legend(loc="best", fontsize=7)
-        ax.set_title(f"sim serve {self.scenario.name} ({self.kind}), {self.t:.0f} s")
-        return save(fig, path)

@@ -62,8 +62,8 @@ def command(args: argparse.Namespace, sc, kind: str) -> int:
     """Serve the autopilot of vehicle ``kind`` until it stops, the run's duration ends or the user interrupts;
     then its trajectory. 1: the autopilot failed; 2: the one given is no usable PX4."""
     from sim.firmware.process import stop_on_terminate
-    from sim.firmware.report import trajectory
     from sim.policies import COMPANION_POLICY, PX4_VEHICLE
+    from sim.report import trajectory
 
     policy = policy_for(args, kind)
     companion = policy == COMPANION_POLICY
@@ -90,7 +90,7 @@ def command(args: argparse.Namespace, sc, kind: str) -> int:
         print(f"returnlink: stopped; {pilot.who} was stopped", file=sys.stderr)
     finally:
         server.close()
-    if server.plant.rows:
+    if server.ticks:
         print(f"returnlink: wrote {trajectory(server, out / 'trajectory.png')}", file=sys.stderr)
     return 0
 

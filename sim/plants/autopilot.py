@@ -187,11 +187,12 @@ class AutopilotPlant:
 
     @staticmethod
     def pictures(run, out: Path) -> list[Path]:
-        """trajectory.png and timeline.png of the modes (``sim.firmware.report``); matplotlib is imported only when
-        plots are drawn (about 0.4 CPU-s)."""
-        from sim.firmware import report
+        """trajectory.png (every run's, ``sim.report``) and timeline.png of the modes (``sim.firmware.report``);
+        matplotlib is imported only when plots are drawn (about 0.4 CPU-s)."""
+        from sim import report
+        from sim.firmware import report as modes_report
 
-        return [report.trajectory(run, out / "trajectory.png"), report.timeline(run, out / "timeline.png")]
+        return [report.trajectory(run, out / "trajectory.png"), modes_report.timeline(run, out / "timeline.png")]
 
 
 __all__ = ["DT", "AutopilotPlant"]
