@@ -22,7 +22,7 @@ from sim.compare import differing
 from sim.firmware.companion_operator import CompanionOperator
 from sim.firmware.metrics import REPEATABILITY
 from sim.firmware.process import INSTANCE_ENV, MAX_INSTANCE, FirmwareError, claim_instance
-from sim.firmware.run import CompanionRun, FirmwareRun
+from sim.firmware_runs import CompanionRun, FirmwareRun
 from sim.plants.companion import CompanionPlant
 from sim.plants.firmware import FirmwarePlant, firmware_params
 from sim.policies import flies

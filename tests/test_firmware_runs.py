@@ -26,7 +26,7 @@ from sim.compare import differing as differing_within
 from sim.firmware.bridge import MAGIC, SERVO_PACKET, FrameVerdict
 from sim.firmware.metrics import REPEATABILITY, TOLERANCE
 from sim.firmware.process import FirmwareError, wait_for
-from sim.firmware.run import FirmwareRun
+from sim.firmware_runs import FirmwareRun
 from sim.scenario import load
 from tests.firmware_helpers import firmware_or_skip, short_scenario
 

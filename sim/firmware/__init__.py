@@ -6,5 +6,6 @@ SITL backend's packet contract (pure), ``lockstep`` the firmware and its pymunk 
 ``companion_operator`` the scripted ground stations that reach it only through the radio model, ``metrics`` its
 figures read from its modes, ``report`` its plots. What flies it in a scenario is a plant of the one simulator loop
 (``sim.plants.firmware``, ``sim.plants.companion``, driven by ``sim.runner.Run``, or in real time for a ground
-station of your own by ``sim.serve.Server``; ``run`` names those runs as their callers know them).
+station of your own by ``sim.serve.Server``; ``sim.firmware_runs`` names those runs as their callers know
+them).
 """
