@@ -44,15 +44,19 @@ def _same(key: str, metric: str, x, y, tolerance: Tolerance) -> bool:
     if _exact(x) or _exact(y):
         return x == y
     if isinstance(x, (int, float)) and isinstance(y, (int, float)):
-        if isinstance(x, float) and isinstance(y, float) and math.isnan(x) and math.isnan(y):
-            return True
-        allowed = tolerance(key, metric)
-        return x == y if allowed == 0 else abs(x - y) <= allowed + 1e-9
+        return _same_number(x, y, tolerance(key, metric))
     if isinstance(x, dict) and isinstance(y, dict):
         return x.keys() == y.keys() and all(_same(k, metric, x[k], y[k], tolerance) for k in x)
     if isinstance(x, list) and isinstance(y, list):
         return len(x) == len(y) and all(_same(key, metric, p, q, tolerance) for p, q in zip(x, y, strict=True))
     return x == y
+
+
+def _same_number(x: float, y: float, allowed: float) -> bool:
+    """Equal (allowed 0), or within ``allowed``; two NaN are the same missing figure."""
+    if math.isnan(x) and math.isnan(y):
+        return True
+    return x == y if allowed == 0 else abs(x - y) <= allowed + 1e-9
 
 
 def _exact(x) -> bool:
