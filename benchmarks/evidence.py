@@ -29,6 +29,10 @@ trial's own value (``sim.campaign.store.percentile``, as in every sweep table):
   mean rest from the loss, contacts in returns.
 - ``compare``: per scenario (``rows=``) and policy (``policies=``, in that order, on whichever robot flew it), pass
   rate, trials regained by the return, time to link p50 / P95, mean rest from the loss, contacts in returns.
+- ``spread``: time to link under a one-tick perturbation (issue 38). The sweep swept one parameter (``param=``,
+  default LNK_TIMEOUT) over two values one tick apart; each trial (scenario, robot, seed, policy) is paired with its
+  twin and the gap between their times to link is the spread. Per robot: pairs, mean / P95 / largest gap, pairs more
+  than 1 s apart; ``before=SWEEP`` (with ``before_tree=HASH``, kept as written) adds the same rows for that sweep.
 
 Exit 0 when written, 2 on a bad argument, a sweep that cannot be read or a marker that cannot be followed (file,
 line and what).
@@ -218,6 +222,40 @@ def compare_table(rows: list[dict], order: list[str] | None, policies: list[str]
     return "\n".join(lines)
 
 
+def perturbation_gaps(rows: list[dict], param: str) -> dict[str, list[float]]:
+    """Per robot, the gap in time to link between each trial and its twin one parameter value away (both finished,
+    both regained; a trial whose twin never regained is a gap of inf)."""
+    pairs: dict[tuple, dict[float, float]] = {}
+    for r in finished(rows):
+        ttl, value = time_to_link(r), params_of(r).get(param)
+        if ttl is None or value is None:
+            continue
+        pairs.setdefault((r["scenario"], r["vehicle"], r["seed"], r["policy"]), {})[value] = ttl
+    gaps: dict[str, list[float]] = {}
+    for (_, robot, _, _), twins in sorted(pairs.items()):
+        if len(twins) == 2:
+            a, b = twins.values()
+            gaps.setdefault(robot, []).append(math.inf if math.isinf(a) != math.isinf(b) else
+                                              0.0 if math.isinf(a) else abs(a - b))
+    return gaps
+
+
+def spread_table(rows: list[dict], param: str, before: list[dict] | None = None,
+                 trees: tuple[str, str] = ("", "")) -> str:
+    """Per tree and robot: the one-tick spread of time to link (``perturbation_gaps``)."""
+    lines = ["| tree | robot | pairs | mean gap | P95 gap | largest gap | pairs over 1 s apart |",
+             "|---|---|---|---|---|---|---|"]
+    for label, rs in ((trees[0], before), (trees[1], rows)):
+        if rs is None:
+            continue
+        for robot, gaps in sorted(perturbation_gaps(rs, param).items()):
+            shown = [seconds(v, 2) + ("" if v is None or math.isinf(v) else " s")
+                     for v in (mean(gaps), p(gaps, 95), max(gaps))]
+            lines.append(f"| {label} | {robot} | {len(gaps)} | {' | '.join(shown)} | "
+                         f"{sum(1 for g in gaps if g > 1.0)} |")
+    return "\n".join(lines)
+
+
 # ----- the page (pure: text and sweeps in, text out) ----------------------------------------------------------
 def parse_marker(text: str) -> dict[str, str]:
     out = {}
@@ -251,16 +289,21 @@ def table_for(opts: dict[str, str], sweeps: Callable[[str], list[dict]]) -> str:
         return seek_table(rows, _list(opts, "split") or [])
     if kind == "compare":
         return compare_table(rows, _list(opts, "rows"), _list(opts, "policies") or list(BASELINES))
-    raise ValueError(f"table={kind!r}: family, builtin, seek or compare")
+    if kind == "spread":
+        before = sweeps(opts["before"]) if "before" in opts else None
+        return spread_table(rows, opts.get("param", "LNK_TIMEOUT"), before,
+                            (f"`{opts.get('before_tree', '?')}` (before)", f"`{opts.get('tree', '?')}`"))
+    raise ValueError(f"table={kind!r}: family, builtin, seek, compare or spread")
 
 
 def provenance(opts: dict[str, str], counts: Callable[[str], tuple[int, int]]) -> str:
     """The line under a table: the spec and tree its sweep ran, and how many trials it holds."""
     parts = []
-    for key in ("sweep", "weak"):
+    for key in ("sweep", "weak", "before"):
         if key in opts:
             n, errors = counts(opts[key])
-            parts.append(f"{n:,} trials, {errors} errors" + (" (weak radio)" if key == "weak" else ""))
+            note = {"weak": " (weak radio)", "before": " (before)"}.get(key, "")
+            parts.append(f"{n:,} trials, {errors} errors{note}")
     spec = ", ".join(f"`{s}`" for s in opts.get("spec", "?").split(","))
     seeds = f", seeds {opts['seeds']}" if "seeds" in opts else ""
     return (f"*Written by `benchmarks/evidence.py` from the sweep of {spec}{seeds} on tree `{opts.get('tree', '?')}` "
@@ -282,7 +325,7 @@ def rewrite(text: str, sweeps: dict[str, list[dict]], tree: str, doc: str = "doc
             continue
         try:
             opts = parse_marker(m.group(1))
-            needed = [opts[key] for key in ("sweep", "weak") if key in opts]
+            needed = [opts[key] for key in ("sweep", "weak", "before") if key in opts]
             if not needed:
                 raise ValueError("no sweep=NAME")
         except ValueError as e:

@@ -2,7 +2,7 @@
 
 It only knows what a real operator's screen shows (telemetry and lease status that reached it over the radio),
 never the simulator's truth: it takes control, uploads the return plan, arms, drives the route by steering the
-reported position toward each waypoint, stops pushing when its telemetry goes stale, and when the vehicle is
+reported position toward each waypoint, lets go of the stick when its telemetry goes stale, and when the vehicle is
 back and waiting for a claim it claims the fresh lease and drives the resume route.
 
 Like a person, it learns from a lost link: a place it was driving toward when the link died is tried again, but
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from gcs.station import GroundStation, LeaseStatus, Pending, Transfer, VehicleView, mav
 from link.mission import Item
 
-STALE_TELEMETRY = 1.0  # s: an operator stops pushing the stick when the picture freezes
+STALE_TELEMETRY = 1.0  # s: an operator lets go of the stick when the picture freezes
 WAYPOINT_RADIUS = 1.5  # m
 # what ``step`` compares the vehicle's status with every tick, looked up in the dialect once
 _AWAITING_CLAIM, _TELEOP = mav.RETURNLINK_STATE_AWAITING_CLAIM, mav.RETURNLINK_STATE_TELEOP
@@ -92,32 +92,42 @@ class Operator:
         if st is None:
             return
         if st.state == _AWAITING_CLAIM and st.owner == gs.sysid and fresh:
-            if self.cut_off is not None:  # the link died on the way there: the vehicle came back without it
-                self.losses[self.cut_off] = self.losses.get(self.cut_off, 0) + 1
-                self.cut_off = None
-            if self.pending is None or self.pending.done:
-                self.pending = gs.claim(-1)
-                self.claims += 1
-                self._say(t, f"claiming [{st.epoch},{st.current}]")
-                if self.phase == "driving" and not self.leg.done:
-                    self.phase = "resuming"
-                if self.rejoin and self.phase == "resuming" and v.position is not None:
-                    self.resume.join(*v.position)  # the return moved the robot: pick the way home up from there
-            return
-        if not fresh:
+            self._claim(t, st)
+        elif not fresh:
             self.cut_off = self.heading_to or self.cut_off  # the latest sign of a loss names the place
-            gs.stop_streaming()  # the picture froze: stop pushing the stick
-            return
-        if st.state != _TELEOP or st.owner != gs.sysid:
+            # the picture froze: the hand comes off the stick, and the joystick streams it at rest whatever the
+            # station hears, as ground stations' joysticks do (docs/simulate.md, "The scripted station")
+            gs.stop()
+        elif st.state != _TELEOP or st.owner != gs.sysid:
             if st.state == _RETURNING and st.last_reason == _COMMS_LOST:
                 self.cut_off = self.heading_to or self.cut_off  # the vehicle lost us and is coming back
             gs.stop()
-            return
+        else:
+            self._drive_on()
+
+    def _claim(self, t: float, st: LeaseStatus) -> None:
+        """The vehicle is back and waits for our claim: count the loss against the place it was cut off on the way
+        to, claim the fresh lease, and from here drive the way home, picked up where the return left the robot."""
+        gs, v = self.gs, self.gs.vehicle
+        if self.cut_off is not None:  # the link died on the way there: the vehicle came back without it
+            self.losses[self.cut_off] = self.losses.get(self.cut_off, 0) + 1
+            self.cut_off = None
+        if self.pending is None or self.pending.done:
+            self.pending = gs.claim(-1)
+            self.claims += 1
+            self._say(t, f"claiming [{st.epoch},{st.current}]")
+            if self.phase == "driving" and not self.leg.done:
+                self.phase = "resuming"
+            if self.rejoin and self.phase == "resuming" and v.position is not None:
+                self.resume.join(*v.position)  # the return moved the robot: pick the way home up from there
+
+    def _drive_on(self) -> None:
+        """Our lease, a fresh picture: drive the leg of the phase (the route, or after a claim the way home)."""
         if self.phase == "driving" and self.claims and self.leg.done:
             self.phase = "resuming"
         leg = self.resume if self.phase == "resuming" else self.leg
         if leg.done:
-            gs.stop()
+            self.gs.stop()
         else:
             self._drive(leg)
 

@@ -93,3 +93,21 @@ def test_a_marker_it_cannot_follow_is_named_by_file_and_line(tmp_path, capsys):
     assert ev.main([f"tiny={sweep}", "--doc", str(doc)]) == 2
     assert f"{doc}:1: no <!-- /evidence -->" in capsys.readouterr().err
     assert ev.main([f"tiny={tmp_path / 'nowhere'}", "--doc", str(doc)]) == 2
+
+
+def test_the_spread_pairs_each_trial_with_its_twin_one_tick_away():
+    """Issue 38's one-tick spread: a trial and its twin at the other LNK_TIMEOUT give one gap each; a twin that never
+    regained is an infinite gap; the before sweep's rows come first, under their own tree."""
+    ev = _module()
+    def twins(seed: int, ttl: float | None, other: float | None) -> list[dict]:
+        return [_row(seed, "rover", "returnlink", ttl, LNK_TIMEOUT=3.0),
+                _row(seed, "rover", "returnlink", other, LNK_TIMEOUT=3.02)]
+
+    after = twins(1, 6.0, 6.5) + twins(2, 5.0, 5.0)
+    before = twins(1, 6.2, 10.1) + twins(2, 5.0, None)
+    assert ev.perturbation_gaps(after, "LNK_TIMEOUT") == {"rover": [0.5, 0.0]}
+    gaps = ev.perturbation_gaps(before, "LNK_TIMEOUT")["rover"]
+    assert abs(gaps[0] - 3.9) < 1e-9 and gaps[1] == float("inf")
+    table = ev.spread_table(after, "LNK_TIMEOUT", before, ("old", "new")).splitlines()
+    assert table[2].startswith("| old | rover | 2 |") and table[2].endswith("| never | 2 |"), table[2]
+    assert table[3] == "| new | rover | 2 | 0.25 s | 0.50 s | 0.50 s | 0 |", table[3]

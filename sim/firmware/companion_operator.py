@@ -86,7 +86,7 @@ class ThroughCompanion:
 
 
 class CompanionOperator(ThroughCompanion, FirmwareOperator):
-    lets_go = False  # a frozen picture stops its stream, as the native operator's does
+    lets_go = True  # a frozen picture: the hand off the stick, streamed at rest as the native station's is
 
     def __init__(self, route, resume_route, origin: tuple[float, float], plan: list[Item], attempts: int = 2,
                  sysid: int = GCS_SYSID, compid: int = GCS_COMPID, target_system: int = 1,
@@ -129,14 +129,14 @@ class CompanionOperator(ThroughCompanion, FirmwareOperator):
             self.drives_home()
             self._step(t)
             return
-        # the return holds the lease: what was being driven toward counts as cut off; while its picture is fresh
-        # the operator holds its stick still, as the native operator does (``gcs.station.GroundStation.stop``): a
-        # zero-velocity target to the autopilot at 10 Hz, which the companion refuses under the return's lease but
-        # hears, so a regain is judged on the same stream for every robot (a heartbeat alone is three seconds of
-        # packets for the three a regain needs)
+        # the return holds the lease: what was being driven toward counts as cut off; the operator holds its stick
+        # still and the joystick streams it at rest whatever the station hears, as the native station's does
+        # (``gcs.station.GroundStation.stop``): a zero-velocity target to the autopilot at 10 Hz, which the
+        # companion refuses under the return's lease but hears, so a regain is judged on the same stream for every
+        # robot (a heartbeat alone is three seconds of packets for the three a regain needs)
         self.cut_off = self.heading_to or self.cut_off
         self.sent_target = None
-        if self.fresh(t) and t >= self.next_stick:
+        if t >= self.next_stick:
             self.next_stick = t + STICK_PERIOD
             self._send(mav.MAVLink_set_position_target_local_ned_message(
                 0, self.target, 1, mav.MAV_FRAME_BODY_NED, HELD_STICK, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0))

@@ -66,34 +66,51 @@ class Tap:
             if kind == "BAD_DATA":
                 continue
             out.append(msg.get_msgbuf())
-            if msg.get_srcComponent() != 1:
-                continue
-            if kind == "HEARTBEAT":
-                self.armed = bool(msg.base_mode & apm.MAV_MODE_FLAG_SAFETY_ARMED)
-                if msg.custom_mode != self.mode:
-                    self.mode = msg.custom_mode
-                    self.modes.append((t, msg.custom_mode))
-            elif kind == "LOCAL_POSITION_NED":
-                self.estimate = (msg.x, msg.y)
-            elif kind == "HOME_POSITION":
-                self.home = True
-            elif kind == "EKF_STATUS_REPORT":
-                f = msg.flags
-                self.ekf_ok = bool(f & apm.EKF_POS_HORIZ_ABS) and not f & apm.EKF_CONST_POS_MODE
-            elif kind == "SYS_STATUS":
-                self.prearm_ok = bool(msg.onboard_control_sensors_health & apm.MAV_SYS_STATUS_PREARM_CHECK)
-            elif kind == "STATUSTEXT":
-                text = msg.text
-                self.texts.append((t, text))
-                if self.version is None and text.startswith("ArduRover"):
-                    self.version = text.strip()
-            elif kind == "PARAM_VALUE" and msg.param_id.startswith("SERVO") and msg.param_id.endswith("_FUNCTION"):
-                ch = msg.param_id[5:-9]
-                if ch.isdigit():
-                    self.servo_functions[int(ch)] = int(round(msg.param_value))
-            elif kind == "COMMAND_ACK" and msg.result not in (apm.MAV_RESULT_ACCEPTED, apm.MAV_RESULT_IN_PROGRESS):
-                self.rejected += 1
+            if msg.get_srcComponent() == 1:
+                note = self._NOTES.get(kind)
+                if note is not None:
+                    note(self, msg, t)
         return out
+
+    # ----- what each of the autopilot's messages says (one small method a kind, looked up by ``_NOTES``) ------
+    def _heartbeat(self, msg, t: float) -> None:
+        self.armed = bool(msg.base_mode & apm.MAV_MODE_FLAG_SAFETY_ARMED)
+        if msg.custom_mode != self.mode:
+            self.mode = msg.custom_mode
+            self.modes.append((t, msg.custom_mode))
+
+    def _local_position(self, msg, t: float) -> None:
+        self.estimate = (msg.x, msg.y)
+
+    def _home(self, msg, t: float) -> None:
+        self.home = True
+
+    def _ekf_status(self, msg, t: float) -> None:
+        f = msg.flags
+        self.ekf_ok = bool(f & apm.EKF_POS_HORIZ_ABS) and not f & apm.EKF_CONST_POS_MODE
+
+    def _sys_status(self, msg, t: float) -> None:
+        self.prearm_ok = bool(msg.onboard_control_sensors_health & apm.MAV_SYS_STATUS_PREARM_CHECK)
+
+    def _statustext(self, msg, t: float) -> None:
+        text = msg.text
+        self.texts.append((t, text))
+        if self.version is None and text.startswith("ArduRover"):
+            self.version = text.strip()
+
+    def _param_value(self, msg, t: float) -> None:
+        if msg.param_id.startswith("SERVO") and msg.param_id.endswith("_FUNCTION"):
+            ch = msg.param_id[5:-9]
+            if ch.isdigit():
+                self.servo_functions[int(ch)] = int(round(msg.param_value))
+
+    def _command_ack(self, msg, t: float) -> None:
+        if msg.result not in (apm.MAV_RESULT_ACCEPTED, apm.MAV_RESULT_IN_PROGRESS):
+            self.rejected += 1
+
+    _NOTES = {"HEARTBEAT": _heartbeat, "LOCAL_POSITION_NED": _local_position, "HOME_POSITION": _home,
+              "EKF_STATUS_REPORT": _ekf_status, "SYS_STATUS": _sys_status, "STATUSTEXT": _statustext,
+              "PARAM_VALUE": _param_value, "COMMAND_ACK": _command_ack}
 
 
 class Lockstep:

@@ -176,10 +176,9 @@ class FirmwareOperator:
 
     def _hold_still(self, t: float) -> None:
         """A zero stick, streamed as the native station streams it (``GroundStation.stop``): when the route is
-        driven, and when the picture has frozen. The native operator then stops streaming and its vehicle stops
-        0.5 s after the last setpoint (``vehicle.teleop.SETPOINT_TTL``); GUIDED keeps driving the last velocity for
-        3 s, so the operator lets go of its stick instead, which stops the rover as soon as any of it gets through
-        a fading link."""
+        driven, and when the picture has frozen: the hand comes off the stick and the joystick streams it at rest
+        whatever the station hears, as the native station's does, which stops the rover as soon as any of it gets
+        through a fading link (GUIDED alone would keep driving the last velocity for 3 s)."""
         self._stick(t, STOPPED, frame=apm.MAV_FRAME_BODY_NED)
 
     def request_rtl(self, t: float) -> None:
@@ -201,8 +200,28 @@ class FirmwareOperator:
         return self.out
 
     def _step(self, t: float) -> None:
-        phase = self.phase
         retry = t >= self.next_retry
+        if self.phase in ("connect", "guided", "arming"):
+            self._set_up(t, retry)
+        elif not self.fresh(t):
+            self.cut_off = self.heading_to or self.cut_off
+            if self.lets_go and self.mode == GUIDED and self.phase in ("driving", "resuming"):
+                self._hold_still(t)  # the picture froze: it lets go of the stick (see ``_hold_still``)
+        elif self.mode in RETURN_MODES:
+            self._after_return(t, retry)
+        else:
+            self.rest_since = None
+            if self.mode != GUIDED:
+                return
+            leg = self.resume if self.phase == "resuming" else self.leg
+            if self.phase == "driving" and leg.done:
+                self._hold_still(t)
+                return
+            self._drive(leg, t)
+
+    def _set_up(self, t: float, retry: bool) -> None:
+        """Ask for the position and attitude streams, switch to GUIDED, arm: one step at a time, retried."""
+        phase = self.phase
         if phase == "connect":
             if self.mode is not None and retry:
                 self.next_retry = t + RETRY_S
@@ -210,55 +229,41 @@ class FirmwareOperator:
                               LOCAL_POSITION_INTERVAL_US)
                 self._command(apm.MAV_CMD_SET_MESSAGE_INTERVAL, apm.MAVLINK_MSG_ID_ATTITUDE, ATTITUDE_INTERVAL_US)
                 self.phase = "guided"
-            return
-        if phase == "guided":
+        elif phase == "guided":
             if self.mode == GUIDED:
                 self.phase = "arming"
             elif retry:
                 self.next_retry = t + RETRY_S
                 self._set_mode(GUIDED)
+        elif self.armed:
+            self.phase = "driving"
+            self.log.append((t, "armed, driving"))
+        elif retry:
+            self.next_retry = t + RETRY_S
+            self._command(apm.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+
+    def _after_return(self, t: float, retry: bool) -> None:
+        """A return mode (the failsafe's, or the one the operator asked for): once the rover holds or has stood
+        still for REST_S, the operator counts the loss and takes it back in GUIDED, unless it asked for that RTL."""
+        phase = self.phase
+        self.cut_off = self.heading_to or self.cut_off
+        if self.speed < REST_SPEED:
+            self.rest_since = t if self.rest_since is None else self.rest_since
+        else:
+            self.rest_since = None
+        if not (self.mode == HOLD or (self.rest_since is not None and t - self.rest_since >= REST_S)):
             return
-        if phase == "arming":
-            if self.armed:
-                self.phase = "driving"
-                self.log.append((t, "armed, driving"))
-            elif retry:
-                self.next_retry = t + RETRY_S
-                self._command(apm.MAV_CMD_COMPONENT_ARM_DISARM, 1)
-            return
-        fresh = self.fresh(t)
-        if not fresh:
-            self.cut_off = self.heading_to or self.cut_off
-            if self.lets_go and self.mode == GUIDED and self.phase in ("driving", "resuming"):
-                self._hold_still(t)  # the picture froze: it lets go of the stick (see ``_hold_still``)
-            return
-        if self.mode in RETURN_MODES:
-            self.cut_off = self.heading_to or self.cut_off
-            if self.speed < REST_SPEED:
-                self.rest_since = t if self.rest_since is None else self.rest_since
-            else:
-                self.rest_since = None
-            if self.mode == HOLD or (self.rest_since is not None and t - self.rest_since >= REST_S):
-                if phase == "rtl":
-                    return  # the operator asked for this return: it leaves the rover where RTL took it
-                self._count_loss()
-                if retry:
-                    self.next_retry = t + RETRY_S
-                    self._set_mode(GUIDED)
-                    self.sent_target = None
-                    self.log.append((t, "taking control back"))
-                    if phase == "driving":
-                        self.phase = "resuming"
-                    self._rejoin()
-            return
-        self.rest_since = None
-        if self.mode != GUIDED:
-            return
-        leg = self.resume if self.phase == "resuming" else self.leg
-        if self.phase == "driving" and leg.done:
-            self._hold_still(t)
-            return
-        self._drive(leg, t)
+        if phase == "rtl":
+            return  # the operator asked for this return: it leaves the rover where RTL took it
+        self._count_loss()
+        if retry:
+            self.next_retry = t + RETRY_S
+            self._set_mode(GUIDED)
+            self.sent_target = None
+            self.log.append((t, "taking control back"))
+            if phase == "driving":
+                self.phase = "resuming"
+            self._rejoin()
 
     def _count_loss(self) -> None:
         """The rover came back without the link: the waypoint it was driving toward counts one loss, once (it is
