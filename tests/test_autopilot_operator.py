@@ -23,7 +23,7 @@ from sim.firmware.operator import (
     FirmwareOperator,
     drive_setpoint,
 )
-from sim.operator import WAYPOINT_RADIUS
+from sim.station_script import WAYPOINT_RADIUS
 from vehicle.navigation import TURN_IN_PLACE
 
 # gen:office seed 1: in along the corridor, a left turn through a door on the corridor's east side, into the room;
