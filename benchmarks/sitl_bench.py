@@ -26,7 +26,7 @@ from link.radio import subsystem_rng
 from sim.driver import SimDriver
 from sim.runner import Run
 from sim.scenario import load
-from vehicle.app import DT
+from vehicle.core import DT
 from vehicle.estimator import Estimator
 
 MINUTES = 10.0

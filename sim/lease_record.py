@@ -5,9 +5,13 @@ record, and ``sim.metrics`` reads it.
 
 A mixin of the one loop (``sim.runner.Run``), because the record is a few calls inside its tick:
 ``_vehicle_state(v)`` before the vehicle's tick and ``_vehicle_ticked(v, t, before)`` after it,
-``_track_block(v, t, pos, cur, returning)`` once a tick after the per-tick row was appended to ``self._rows`` (rows
+``_track_block(s, t, pos, cur, returning)`` once a tick after the per-tick row was appended to ``self._rows`` (rows
 start with t, true x, true y, est x, est y), ``_close_block`` when the run ends. The host provides ``vehicle``,
-``world``, ``t``, ``policy``, ``frame_offset`` and ``_rows``.
+``contingency``, ``world``, ``t``, ``policy``, ``frame_offset`` and ``_rows``.
+
+It reads the vehicle only as any observer may (``vehicle.port``): its status snapshot (``Status``), the parameters,
+the trail's crumbs, and the log of its lease transitions (``log``), which it keeps a copy of as they come
+(``lease_log``); never the core's own fields.
 """
 
 from __future__ import annotations
@@ -19,7 +23,9 @@ import numpy as np
 
 from sim.policies.base import Baseline
 from sim.scenario import PLAN_COMMANDS
-from vehicle.app import DT
+from vehicle.core import DT
+from vehicle.lease import LeaseEvent
+from vehicle.port import Status
 
 COMMAND_NAMES = {num: name for name, num in PLAN_COMMANDS.items()}
 
@@ -63,32 +69,54 @@ class LeaseRecord:
         # when each loss's trigger condition became true: LNK_TIMEOUT after the owner was last heard (silence), or
         # the tick the owner's delivery estimate fell below LNK_MIN_Q (quality), whichever came first
         self.loss_conditions: list[float | None] = []
+        self._log: list[LeaseEvent] = []  # the vehicle's lease transitions read so far (``lease_log``)
+        self._log_of = None  # ... of this vehicle (a plant boots its vehicle once; a new one starts a new copy)
 
-    @staticmethod
-    def _vehicle_state(v) -> tuple:
-        """What ``_vehicle_ticked`` compares with after the tick."""
-        link = v.book.link
-        return len(v.event_log), link.last_heard, link.lost, link.low
+    def _read_log(self, v) -> int:
+        """Copy the lease transitions ``v`` logged since the last read; how many were read before these."""
+        if v is not self._log_of:
+            self._log_of, self._log = v, []
+        n = len(self._log)
+        new = v.log(n)
+        if new:
+            self._log.extend(new)
+        return n
+
+    @property
+    def lease_log(self) -> list[LeaseEvent]:
+        """Every lease transition of the run's vehicle since it booted, oldest first (empty: none aboard)."""
+        v = self.vehicle
+        if v is not None:
+            self._read_log(v)
+        return self._log
+
+    def _vehicle_state(self, v) -> tuple:
+        """What ``_vehicle_ticked`` compares with after the tick (the transitions of the commands heard before the
+        tick are read here, and are not the tick's)."""
+        self._read_log(v)
+        link = v.status().book.link
+        return len(self._log), link.last_heard, link.lost, link.low
 
     def _vehicle_ticked(self, v, t: float, before: tuple) -> None:
         """What the metrics need of the tick just run: when the owner's link came back, and each new lease event
         (the lease the runner's own audit expects, the losses and the regains)."""
         n_events, heard, was_lost, low = before
-        if was_lost:
-            link = v.book.link
-            if not link.lost and v.book.owner is not None:
-                self.link_backs.append((t, link.contact_since))
-        if len(v.event_log) > n_events:
-            for e in v.event_log[n_events:]:
+        book = v.status().book
+        link = book.link
+        if was_lost and not link.lost and book.owner is not None:
+            self.link_backs.append((t, link.contact_since))
+        self._read_log(v)
+        if len(self._log) > n_events:
+            for e in self._log[n_events:]:
                 self.announced = (e.epoch, e.current)
                 if e.reason.name == "COMMS_LOST":
                     self.losses.append((e.t, heard))
                     silence = None if heard is None else heard + v.params["LNK_TIMEOUT"]
                     self.loss_conditions.append(min(silence, t) if low and silence is not None else silence)
                 elif e.reason.name == "LINK_REGAINED":
-                    self.regains.append((e.t, v.book.link.contact_since))
+                    self.regains.append((e.t, link.contact_since))
 
-    def _track_block(self, v, t: float, pos: tuple[float, float], cur, returning: bool) -> None:
+    def _track_block(self, s: Status, t: float, pos: tuple[float, float], cur, returning: bool) -> None:
         """The block the current lease is, opened, closed and measured (``pos``: the true position this tick)."""
         blocks = self.blocks
         blk = blocks[-1] if blocks and blocks[-1].ended is None else None
@@ -104,47 +132,48 @@ class LeaseRecord:
             if len(rows) > 1:
                 a = rows[-2]
                 blk.distance += math.hypot(pos[0] - a[1], pos[1] - a[2])
-                if v.control.command_out != (0.0, 0.0):
+                if s.command_out != (0.0, 0.0):
                     blk.driving_s += DT
             blk.collisions = self.world.collisions - blk.collisions0
             blk.max_disp = max(blk.max_disp, math.hypot(pos[0] - blk.start[0], pos[1] - blk.start[1]))
-            self._plan_of(v, blk)
+            self._plan_of(s, blk)
 
     def _command_of(self, lease) -> str:
         """The block's mission items by name (RETURN_TO_LINK, ...), or the baseline policy that drives it."""
-        if isinstance(self.vehicle.contingency, Baseline):
+        if isinstance(self.contingency, Baseline):
             return self.policy.upper()
         items = lease.block.payload if lease.block is not None else ()
         return "+".join(COMMAND_NAMES.get(it.command, str(it.command)) for it in items)
 
-    def _plan_of(self, v, blk: BlockRecord) -> None:
-        """Target, route and displacement limit of ``blk``, taken only from the service state of that very lease:
-        the state left over from the block before must never lend its limit to the next one."""
-        c = v.contingency
+    def _plan_of(self, s: Status, blk: BlockRecord) -> None:
+        """Target, route and displacement limit of ``blk``, taken only from the service state of that very lease
+        (``s``: the snapshot of this tick): the state left over from the block before must never lend its limit to
+        the next one."""
+        c = self.contingency
         if isinstance(c, Baseline):
             if c.route is not None and c.route is not blk.route_obj:
                 blk.route_obj, blk.route, blk.target = c.route, c.route, c.target
                 # every baseline heads for home, where the estimator started: the true start of the run
                 blk.target_true = self._true_of(0) if c.target is not None and self._rows else None
             return
-        st = v.returns.service
-        if st is None or v.returns.index != blk.index:
+        st = s.block
+        if st is None or s.block_index != blk.index:
             return
         if st.route is not None and st.route is not blk.route_obj:
             blk.route_obj = st.route
             blk.route = st.route.points if blk.route is None else np.vstack([blk.route, st.route.points])
             if blk.target is None and st.route.target is not None:
                 blk.target = st.route.target
-                blk.target_true = self._target_true(v, st.route)
+                blk.target_true = self._target_true(st.route)
         if blk.max_disp_allowed == math.inf:
             blk.max_disp_allowed = st.max_displacement
 
-    def _target_true(self, v, route) -> tuple[float, float] | None:
+    def _target_true(self, route) -> tuple[float, float] | None:
         """Where in the true frame the robot was at the place ``route`` heads for. A crumb target: when the crumb
         was laid. The map's place lies on the way back but is not a crumb (a kept trail stretch may be metres long):
         where the robot was when its estimate passed nearest the place, in the ticks recorded so far."""
         if not route.by_map:
-            k, times = route.target_index, v.trail.times()
+            k, times = route.target_index, self.vehicle.crumbs().times
             return self.true_at(float(times[k])) if 0 <= k < len(times) else None
         rows = self._rows
         if not rows:
@@ -162,7 +191,7 @@ class LeaseRecord:
         blk = self.blocks[-1]
         blk.ended = self.t
         blk.end = self._true_of(-1) if self._rows else blk.start
-        for ev in self.vehicle.event_log:
+        for ev in self.lease_log:
             if ev.expired == blk.index and ev.t >= blk.started - 1e-9:
                 blk.reason = ev.reason.name
                 break
@@ -179,4 +208,4 @@ class LeaseRecord:
     @property
     def lease_events(self) -> list[dict]:
         return [{"t": round(e.t, 3), "expired": e.expired, "current": e.current, "reason": e.reason.name}
-                for e in self.vehicle.event_log]
+                for e in self.lease_log]

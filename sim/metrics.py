@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from vehicle.app import DT, State
+from vehicle.core import DT, State
 from vehicle.link_watch import GOOD_QUALITY as GOOD_LINK_QUALITY
 
 KEYS = ("scenario", "vehicle", "seed", "sim_duration_s", "link_lost_s", "return_started_s", "reaction_latency_s",
@@ -73,8 +73,9 @@ def compute(run) -> dict:
 
 def lease_figures(run) -> dict:
     """The §7 figures of a run whose plant flies returnlink's vehicle (natively, or as the companion beside the
-    firmware), from the run's lease record (``sim.lease_record``) and the vehicle's own counters."""
-    v = run.vehicle
+    firmware), from the run's lease record (``sim.lease_record``) and the vehicle's own counters, as its last status
+    snapshot shows them."""
+    s = run.vehicle.status()
     lost = run.losses[0] if run.losses else None
     first_return, reaction = _return_start(run)
     # the link counts as back when the vehicle says so: LINK_REGAINED ending a block, or after a block completed
@@ -88,14 +89,14 @@ def lease_figures(run) -> dict:
         "reaction_latency_s": rounded(reaction, 4), "link_regained_s": rounded(regained),
         "distance_back_m": rounded(distance_back, 2), "max_displacement_m": rounded(max_disp, 2),
         "final_target_error_m": rounded(_final_target_error(run), 2), "collisions": run.world.collisions,
-        "stale_commands_executed": v.control.stale_commands_executed + run.audit_stale,
-        "commands_rejected": v.commands_rejected,
-        "estimator_rmse_m": rounded(rmse), "trail_points": v.trail.count,
+        "stale_commands_executed": s.stale_commands + run.audit_stale,
+        "commands_rejected": s.commands_rejected,
+        "estimator_rmse_m": rounded(rmse), "trail_points": s.trail_points,
         "trail_max_deviation_m": rounded(_trail_deviation(run, est)), "lease_events": run.lease_events,
     }
     m.update(after_loss(run))
     m["frames"] = dict(FRAMES)
-    m["relapses"] = relapses(run.vehicle.event_log, run.trace.state)
+    m["relapses"] = relapses(run.lease_log, run.trace.state)
     return m
 
 
@@ -103,10 +104,10 @@ def _return_start(run) -> tuple[float | None, float | None]:
     """(when the first return started, how long after its trigger's condition became true it did): the first
     return-service lease, or for a baseline that takes over later than its lease (SmartRTL waits FS_TIMEOUT) when
     it acted; the reaction is measured for the return a COMMS_LOST started, None without one."""
-    v = run.vehicle
-    first_return = next((e.t for e in v.event_log if e.current is not None and _holder_is_service(e)), None)
-    comms_return = next((e for e in v.event_log if e.reason.name == "COMMS_LOST" and _holder_is_service(e)), None)
-    acted = getattr(v.contingency, "acted", None)
+    log = run.lease_log
+    first_return = next((e.t for e in log if e.current is not None and _holder_is_service(e)), None)
+    comms_return = next((e for e in log if e.reason.name == "COMMS_LOST" and _holder_is_service(e)), None)
+    acted = getattr(run.contingency, "acted", None)
     if acted is not None:
         first_return = acted[0] if acted else None
     if comms_return is None:
@@ -151,7 +152,8 @@ def _trail_deviation(run, est: np.ndarray) -> float:
     trace in the true one: ``frame_offset`` is where the first lies in the second (none for the native vehicle,
     whose estimator starts at its true pose)."""
     v = run.vehicle
-    poly = np.vstack([v.trail.points(), [[v.estimator.pose.x, v.estimator.pose.y]]]) + np.asarray(run.frame_offset)
+    pose = v.status().pose
+    poly = np.vstack([v.trail_points(), [[pose.x, pose.y]]]) + np.asarray(run.frame_offset)
     return path_deviation(est[::5], poly)
 
 
@@ -198,7 +200,6 @@ def after_loss(run) -> dict:
     - ``return_speed_mps``: distance driven under service blocks over the time they commanded motion.
     - ``blocks``: one record per service block (true frame).
     """
-    v = run.vehicle
     loss = None
     if run.losses and run.losses[0][1] is not None:
         loss = run.true_at(run.losses[0][1])
@@ -211,7 +212,7 @@ def after_loss(run) -> dict:
     return {
         "loss_position": point(loss), "rest_position": point(rest),
         "rest_link_quality": rounded(quality),
-        "link_cycles": sum(1 for e in v.event_log if e.reason.name == "COMMS_LOST"),
+        "link_cycles": sum(1 for e in run.lease_log if e.reason.name == "COMMS_LOST"),
         "regained_by": regained_by, "collisions_during_return": sum(b.collisions for b in run.blocks),
         "return_speed_mps": rounded(sum(b.distance for b in run.blocks) / driving if driving > 0 else None),
         "blocks": blocks,

@@ -148,9 +148,9 @@ def _draw_link(ax, run: Run) -> None:
 def _draw_run(ax, run: Run, tr: Track) -> None:
     offset = np.array(run.plant.frame_offset, dtype=float)
     _draw_paths(ax, run, tr)
-    v = run.vehicle
-    if v is not None:
-        draw_trail(ax, v.trail.points() + offset, v.trail.link_good(), " (estimate frame)")
+    if run.vehicle is not None:
+        crumbs = run.vehicle.crumbs()  # the trail as the vehicle's port gives it
+        draw_trail(ax, crumbs.points + offset, crumbs.link_good, " (estimate frame)")
     _draw_blocks(ax, run, offset)
     _draw_link(ax, run)
 

@@ -37,9 +37,10 @@ from sim.plants import Plant
 from sim.plants.native import TICK_RATE, NativePlant
 from sim.policies import APPLET_POLICY, COMPANION_POLICY, DEFAULT_POLICY, FIRMWARE_VEHICLE, PX4_VEHICLE
 from sim.scenario import Scenario
-from vehicle.app import DT
+from vehicle.core import DT
 from vehicle.lease import Holder
 from vehicle.lease_terms import State
+from vehicle.port import Status
 
 # A lockstep run has no wall-clock time of its own: its .tlog is stamped from 2026-01-01 00:00:00 UTC + sim time
 # (1970, the UNIX epoch itself, made MAVProxy and QGroundControl show a log from before MAVLink existed).
@@ -215,6 +216,11 @@ class Run(LeaseRecord):
     def vehicle(self):
         """returnlink's vehicle aboard the plant (None: the firmware alone, or a companion not booted yet)."""
         return self.plant.vehicle
+
+    @property
+    def contingency(self):
+        """The link-loss baseline the plant's vehicle flies instead of the return plan (``sim.policies``), or None."""
+        return self.plant.contingency
 
     @property
     def audit_stale(self) -> int:
@@ -417,33 +423,35 @@ class Run(LeaseRecord):
             ex, ey = plant.estimate()
             self.trace.rows.append((t, pos[0], pos[1], ex, ey, 0, -1, State.NO_OWNER, link, rssi, False, 0.0, 0.0))
             return
-        p = v.estimator.pose
+        s = v.status()  # (the snapshot of this tick: the endpoint's telemetry took it already, most ticks)
+        p = s.pose
         shift = self._shift
         if shift is None:
             ex, ey = p.x, p.y
         else:
             ex, ey = shift[0] + p.x, shift[1] + p.y
-        cur = v.book.current
+        cur = s.book.current
         if cur is None:
             holder, index, returning = 0, -1, False
         else:
             h = cur.holder
             holder, index, returning = int(h), cur.index, h is Holder.RETURN_SERVICE
-        speed, yaw_rate = v.control.command_out
-        self.trace.rows.append((t, pos[0], pos[1], ex, ey, holder, index, v.state(), link, rssi, v.control.link_is_good,
+        speed, yaw_rate = s.command_out
+        self.trace.rows.append((t, pos[0], pos[1], ex, ey, holder, index, s.state, link, rssi, s.link_good,
                                 speed, yaw_rate))
-        if v.setpoint is not None:
-            self._audit(v)
-        self._track_block(v, t, pos, cur, returning)
+        if s.setpoint is not None:
+            self._audit(s)
+        self._track_block(s, t, pos, cur, returning)
 
-    def _audit(self, v) -> None:
-        """An independent check of a returnlink vehicle's stale-command guard: a teleop setpoint that moved the
-        robot this tick must carry the lease the vehicle last announced as current (LEASE_EVENT) and come from the
-        owner. (The companion runs without teleop: its guard is its router, which its plant audits.)"""
-        sp = v.setpoint
-        if sp is None or v.control.command_out == (0.0, 0.0) or self.announced is None:
+    def _audit(self, s: Status) -> None:
+        """An independent check of a returnlink vehicle's stale-command guard (``s``: its snapshot of this tick): a
+        teleop setpoint that moved the robot this tick must carry the lease the vehicle last announced as current
+        (LEASE_EVENT) and come from the owner. (The companion runs without teleop: its guard is its router, which
+        its plant audits.)"""
+        sp = s.setpoint
+        if sp is None or s.command_out == (0.0, 0.0) or self.announced is None:
             return
-        if (sp.lease.epoch, sp.lease.path[0]) != self.announced or sp.sender != v.book.owner:
+        if (sp.lease.epoch, sp.lease.path[0]) != self.announced or sp.sender != s.book.owner:
             self.stale_setpoints += 1
 
 

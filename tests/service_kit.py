@@ -64,7 +64,7 @@ class Kit:
 
     def take_control(self, sysid: int = OWNER) -> None:
         """Give station ``sysid`` the root lease, as REQUEST_OPERATOR_CONTROL would."""
-        assert self.vehicle.acquire(sysid, 190, self.t, allow_takeover=False).executes
+        assert self.vehicle.operator_control(sysid, 190, self.t, True, allow_takeover=False).executes
         self.vehicle.events.clear()
         self.vehicle.notices.clear()
 

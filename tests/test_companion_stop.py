@@ -5,10 +5,17 @@ rest still streams zero targets at 10 Hz, which the companion refuses once a ret
 return must end where the link came back: LINK_REGAINED, the rover at rest in HOLD between R - 3 m and R from home.
 
 Measured before the brake and the approach speed: LINK_REGAINED 2.5 m inside the edge, then HOLD rolled the rover
-3.2 m further, to rest 5.7 m inside. With them (twice): back into the range at 2.3 m/s (the firmware's speed loop
-overshoots the 2.0 m/s asked for), slowed by the firmware's own acceleration limit toward the approach speed, the
-regain 2.3 m inside at 1.3 m/s, braked in 0.6 m by zero targets: at rest 2.8-2.9 m inside (15.08, 15.19, 15.11 m
-from home in three runs; 15.17 in a fourth, out at up to 2.45 m/s, back at up to 2.34).
+3.2 m further, to rest 5.7 m inside. With them (four runs): back into the range at 2.3 m/s (the firmware's speed loop
+overshoots the 2.0 m/s asked for after the return's start from rest: 2.45 m/s), slowed by the firmware's own
+deceleration limit, braked by zero targets: at rest 2.8-2.9 m inside (15.08, 15.19, 15.11, 15.17 m from home).
+With the overshoot foreseen and taken off the targets (``vehicle.companion.governor``) the return's peak is
+2.02-2.06 m/s against 2.01 driven out on that stretch, and it rests 15.31, 15.65, 15.79 m from home (2.21-2.69 m
+inside; 15.52, 15.50, 15.58, 15.58 before the governor kept its foresight through a dip of a few cm/s; 15.31,
+15.23, 15.51 when it never dropped its foresight, and 15.69, 15.37, 15.51 foreseeing 0.3 s ahead instead of 0.5).
+What is left is the firmware's deceleration (about 1 m/s/s: some 2 m from 2 m/s) and the loop's reaction, about
+0.5 s from the first packet heard to a falling speed: the rest varies with when the first owner packet falls in
+the 10 Hz loops, more than the governor moves it (checked once with the governor taken out on this tree: back at
+2.42 m/s, the speed check failed, at rest 15.40 m from home).
 One firmware per test, on its own instance, stopped by its pid."""
 
 from __future__ import annotations
@@ -37,36 +44,38 @@ def test_the_companion_rests_inside_a_hard_edge_with_link_regained_beside_the_fi
     claim_and_arm(fw, owner)
     owner.reach = lambda: fw.distance() < R
     owner.velocity = (2.0, 0.0)
-    outbound = 0.0
+    outbound = 0.0  # the fastest the owner drove the stretch the return drives again (from R - 3 m out)
 
     def out_of_range() -> bool:
         nonlocal outbound
-        outbound = max(outbound, fw.speed)
+        if fw.distance() >= R - 3.0:
+            outbound = max(outbound, fw.speed)
         return fw.distance() >= R + 1.0
 
     pump([owner, fw], 40, out_of_range, "the rover out of the radio's range")
     owner.velocity = (0.0, 0.0)  # the stick let go: zero targets, heard again once back in range
-    pump([owner, fw], 30, lambda: fw.mode == GUIDED and fw.distance() < R, "the return back into the range")
-    fastest = 0.0
+    fastest = 0.0  # the fastest the return drove, from the owner's stop beyond the edge to the stand in HOLD
+    turned = False
 
     def stood() -> bool:
-        nonlocal fastest
-        fastest = max(fastest, fw.speed)
-        return fw.mode == HOLD and fw.speed < 0.05
+        nonlocal fastest, turned
+        turned = turned or fw.speed < 0.2  # the owner's stop: what follows is the return
+        if turned:
+            fastest = max(fastest, fw.speed)
+        return fw.mode == HOLD and fw.speed < 0.05 and fw.distance() < R
 
-    pump([owner, fw], 30, stood, "the rover to stand in HOLD")
+    pump([owner, fw], 60, stood, "the rover to stand in HOLD inside the range")
     pump([owner, fw], 3)
     rest = fw.distance()
     reasons = [e.reason for e in owner.gs.events]
-    print(f"rest {rest:.2f} m from home, the edge at {R:g} m; fastest back inside the range {fastest:.2f} m/s, "
-          f"out {outbound:.2f} m/s; {reasons}")
+    print(f"rest {rest:.2f} m from home, the edge at {R:g} m; fastest back {fastest:.2f} m/s, out on that stretch "
+          f"{outbound:.2f} m/s; {reasons}")
     assert "LINK_REGAINED" in reasons
-    # DESIGN §6.2's R - 3 m, measured 2.8-2.9 m inside over four runs; 0.5 m more for the firmware's run-to-run
-    # spread (the SITL is not bit-repeatable): the test holds what is guaranteed, the note says what was measured
-    assert R - 3.5 <= rest <= R, f"rests {rest:.2f} m from home, the edge at {R:g} m"
+    # DESIGN §6.2's R - 3 m exactly (see the module docstring for the runs measured)
+    assert R - 3.0 <= rest <= R, f"rests {rest:.2f} m from home, the edge at {R:g} m"
     assert fw.mode == HOLD
-    # never faster back than out: the firmware's speed loop overshoots the 2.0 m/s asked for both ways (measured
-    # 2.45 m/s out, 2.34 back)
+    # never faster back than out: the firmware's speed loop overshoots a target after a start from rest (2.45 m/s
+    # for 2.0, out and back alike); the companion takes the foreseen overshoot off its targets
     assert fastest <= outbound + 0.1, f"back at {fastest:.2f} m/s, out at {outbound:.2f}"
 
 

@@ -258,8 +258,8 @@ def test_stale_guards_catch_a_setpoint_that_slipped_past_the_lease_check(monkeyp
 
     run = Run(load("open"))
     run.announced = (old.epoch, old.index + 5)
-    fake = SimpleNamespace(setpoint=Setpoint(1.0, 0.0, LeaseId(old.epoch, (old.index,)), 9.0, 255),
-                           control=SimpleNamespace(command_out=(1.0, 0.0)), book=SimpleNamespace(owner=255))
+    fake = SimpleNamespace(setpoint=Setpoint(1.0, 0.0, LeaseId(old.epoch, (old.index,)), 9.0, 255),  # a Status
+                           command_out=(1.0, 0.0), book=SimpleNamespace(owner=255))
     run._audit(fake)
     assert run.audit_stale == 1
     fake.setpoint = Setpoint(1.0, 0.0, LeaseId(old.epoch, (old.index + 5,)), 9.0, 200)  # right lease, wrong sender

@@ -53,7 +53,7 @@ def test_every_section_of_the_page_names_a_table_and_its_sweep_spec_and_tree():
     assert not by_hand, f"docs/evidence.md has table lines outside a written section: lines {by_hand}"
     for k in begins:
         opts = ev.parse_marker(ev.BEGIN.match(lines[k]).group(1))
-        assert opts["table"] in ("family", "builtin", "seek", "compare") and opts["sweep"], lines[k]
+        assert opts["table"] in ("family", "builtin", "seek", "compare", "spread") and opts["sweep"], lines[k]
         assert all((ROOT / spec).is_file() for spec in opts["spec"].split(",")), lines[k]
         assert re.fullmatch(r"[0-9a-f]{7,40}", opts["tree"]), lines[k]
         end = lines.index(ev.END, k)

@@ -35,12 +35,16 @@ def test_the_vehicle_runs_without_the_simulator():
 # ----- the import graph: no circles ---------------------------------------------------------------------------
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("vehicle", "link", "gcs", "sim")
+# benchmarks/ is no package, but its scripts import the project like any room: their modules join the graph by the
+# same dotted names (``benchmarks.sitl_bench``)
+ROOMS = (*PACKAGES, "benchmarks")
 
 
 def _project_modules() -> dict[str, Path]:
-    """Every module of the four packages by its dotted name (a package by its own: ``vehicle.services``)."""
+    """Every module of the four packages and of benchmarks/ by its dotted name (a package by its own:
+    ``vehicle.services``)."""
     modules = {}
-    for package in PACKAGES:
+    for package in ROOMS:
         for path in sorted((ROOT / package).rglob("*.py")):
             parts = list(path.relative_to(ROOT).with_suffix("").parts)
             if parts[-1] == "__init__":
@@ -173,6 +177,39 @@ def test_the_port_check_finds_an_import_of_the_core_in_a_room():
     assert _importing_the_core(graph) == {"vehicle.services.x"}
 
 
+# the core's insides: only the onboard package builds on them; every other room boots the core through
+# vehicle/core.py (``boot_core``, with ``DT``, ``State`` and the real-time shell ``run``) and reads it through its port
+INSIDES = ("vehicle.app", "vehicle.control")
+OUTSIDE_ROOMS = ("sim", "gcs", "link", "benchmarks")
+
+
+def _reaching_inside(graph: dict[str, set[str]]) -> dict[str, set[str]]:
+    """The modules of the rooms outside the onboard package that import one of ``INSIDES``, with what they import."""
+    return {m: found & set(INSIDES) for m, found in graph.items()
+            if m.split(".")[0] in OUTSIDE_ROOMS and found & set(INSIDES)}
+
+
+def test_no_room_outside_the_vehicle_imports_the_cores_insides():
+    """issue 39: nothing in sim/, gcs/, link/ or benchmarks/ imports vehicle.app or vehicle.control, type-only and
+    local imports included (the same graph as above): a plant boots the core through ``vehicle.core.boot_core`` and
+    reads it through its port, as the companion does.
+
+    The tests are not a room of the layout: a test of the core's own parts (tests/test_app.py, test_authority.py,
+    ...) imports them as a white-box test must, and a rig standing for a room outside may build a ``Vehicle`` by
+    hand. What binds the tests is the private-names rule below: a test file may import the private names of the
+    module it is named after, and no others."""
+    graph = _import_graph()
+    assert all(any(m.split(".")[0] == room for m in graph) for room in OUTSIDE_ROOMS)  # the rooms were found
+    assert _reaching_inside(graph) == {}
+
+
+def test_the_insides_check_finds_an_import_of_app_or_control_outside():
+    graph = {"sim.runner": {"vehicle.app", "vehicle.port"}, "benchmarks.x_bench": {"vehicle.control"},
+             "gcs.station": {"link.codec"}, "vehicle.core": {"vehicle.app"}, "simx.y": {"vehicle.app"},
+             "link.proxy": {"vehicle.core"}}
+    assert _reaching_inside(graph) == {"sim.runner": {"vehicle.app"}, "benchmarks.x_bench": {"vehicle.control"}}
+
+
 def test_the_import_graph_sees_type_only_local_and_relative_imports_and_finds_circles():
     modules = _project_modules()
     source = ("from typing import TYPE_CHECKING\n"
@@ -223,9 +260,38 @@ def _private_imports(module: str, source: str) -> list[str]:
 
 def test_no_module_imports_another_modules_private_names():
     """issue 29: a name with a leading underscore is its module's own business; another module that needs it
-    needs a public name (the SmartRTL baseline once imported the trail's ``_douglas_peucker``)."""
+    needs a public name (the SmartRTL baseline once imported the trail's ``_douglas_peucker``). The benchmarks'
+    scripts count as modules here too."""
     found = [f for m, path in _project_modules().items() for f in _private_imports(m, path.read_text(encoding="utf-8"))]
     assert found == []
+
+
+def _test_subject(path: Path) -> str:
+    """The project module a test file is named after: tests/test_standoff.py -> ``standoff`` (matched against
+    the last part of a module's name, so vehicle.standoff and sim.standoff would both be its subject)."""
+    return path.stem.removeprefix("test_")
+
+
+def _tests_private_imports(path: Path, source: str) -> list[str]:
+    """The private names ``path`` (a file under tests/) imports from a module other than the one it is named after."""
+    subject = _test_subject(path)
+    return [f for f in _private_imports(f"tests.{path.stem}", source)
+            if f.split(" import ")[0].split("from ")[1].rpartition(".")[2] != subject]
+
+
+def test_a_test_imports_private_names_only_of_the_module_it_is_named_after():
+    """issue 39: the tests' own private imports are covered too. A test may reach into the module it tests
+    (tests/test_standoff.py imports vehicle.standoff's ``_arcs``), never into another one: what a second module
+    needs of it is a public name, for a test as for the code."""
+    files = sorted((ROOT / "tests").rglob("*.py"))
+    found = [f for path in files for f in _tests_private_imports(path, path.read_text(encoding="utf-8"))]
+    assert len(files) > 100 and found == []
+
+
+def test_the_tests_private_import_check_finds_one():
+    source = "from vehicle.standoff import _arcs\nfrom vehicle.trail import _douglas_peucker\n"
+    assert _tests_private_imports(ROOT / "tests" / "test_standoff.py", source) == \
+        ["tests.test_standoff: from vehicle.trail import _douglas_peucker"]
 
 
 def test_the_private_import_check_finds_one():

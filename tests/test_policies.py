@@ -208,7 +208,8 @@ def test_smartrtl_path_deactivates_when_full_for_its_timeout():
 
 def test_smartrtl_deactivated_falls_back_to_a_straight_rtl():
     r = Run(load("tunnel"), "rover", duration=TUNNEL_S, policy="smartrtl")
-    r.vehicle.contingency = small = SmartRTL(max_points=2)  # home and one point: full after a few metres
+    # home and one point: full after a few metres; flown by the vehicle and recorded by the run, as the plant's is
+    r.vehicle.contingency = r.plant.contingency = small = SmartRTL(max_points=2)
     r.run()
     assert not small.path.active and small.path.deactivated_at < _comms_lost(r)
     assert small.fallback

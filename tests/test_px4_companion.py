@@ -1,9 +1,9 @@
 """returnlink companion beside PX4 (docs/architecture.md §11.2): the autopilot recognised from its HEARTBEAT, the
-return driven in Offboard (a velocity stream first, then the switch), Hold on LINK_REGAINED, the dead-man's Hold,
-PX4's parameters read and written bytewise for ``--check`` / ``--configure``; and against the real PX4 rover:
-policy ``companion`` on vehicle ``px4rover`` in the tunnel (lost, returned in Offboard, regained by the return, Hold,
-no contact), a companion killed mid-return leaving the rover in PX4's own Hold within COM_OF_LOSS_T + 2 s, and
-PX4's own parameter encoding.
+return driven in Offboard (a velocity stream first, then the switch), a brake and Hold on LINK_REGAINED, the
+dead-man's Hold, PX4's parameters read and written bytewise for ``--check`` / ``--configure``; and against the real
+PX4 rover: policy ``companion`` on vehicle ``px4rover`` in the tunnel (lost, returned in Offboard, regained by the
+return, no contact), a companion killed mid-return leaving the rover in PX4's own Hold within COM_OF_LOSS_T + 2 s,
+and PX4's own parameter encoding.
 
 The fast tests run against ``tests.px4_standin.FakePX4``. The real PX4 comes from $RETURNLINK_PX4, else the shared
 tree beside the repository (as in test_px4_plant.py): with neither those tests skip, and a variable that is set but
@@ -275,11 +275,13 @@ def test_the_companion_returns_px4_in_offboard_and_leaves_it_in_hold(tmp_path, m
     block = m["blocks"][0]
     assert block["command"] == "RETURN_TO_LINK" and block["distance_m"] > 1.0
     modes = [(e["t"], e["mode"]) for e in m["firmware_modes"]]
-    # driven out in Offboard; Hold once the owner's stream stopped; the return's own Offboard; Hold at the regain
+    # driven out in Offboard; Hold once the owner's stream stopped; the return's own Offboard; at the regain its zero
+    # setpoints, then Hold once the rover stands, unless the operator claimed and drove on first (its stream ends the
+    # brake, as beside ArduPilot: measured, in 60 s it always had)
     during = [name for t, name in modes if block["start_s"] - 0.05 <= t <= block["end_s"] + 0.05]
     assert "OFFBOARD" in during, modes
     after = [name for t, name in modes if t > block["end_s"]]
-    assert after[:1] == ["AUTO_LOITER"] and "OFFBOARD" in after, modes  # Hold, then the operator drives on
+    assert set(after) <= {"AUTO_LOITER", "OFFBOARD"} and modes[-1][1] == "OFFBOARD", modes  # the operator drives on
     assert m["link_regained_s"] - m["link_lost_s"] < 8.0
 
 

@@ -27,11 +27,11 @@ from vehicle.authority import Authority
 from vehicle.contingency import Contingency, ReturnDriver
 from vehicle.control import ControlLoop
 from vehicle.io import RobotDriver
-from vehicle.lease import Holder, LeaseConfig
+from vehicle.lease import Holder, LeaseConfig, LeaseEvent
 from vehicle.lease_terms import State
 from vehicle.linkmap import MapConfig
 from vehicle.params import Params
-from vehicle.port import DT, NOTHING, Announcements, Status
+from vehicle.port import DT, NOTHING, Announcements, Crumbs, Status
 from vehicle.radio_status import STALE_S as RSSI_STALE_S
 from vehicle.service import default_plan
 from vehicle.teleop import MAX_TELEOP_SPEED, MAX_TELEOP_YAW_RATE, SETPOINT_TTL, Setpoint, velocity_to_command
@@ -47,14 +47,16 @@ class Vehicle(Authority):
     It provides ``vehicle.port.VehiclePort``; nothing outside the core changes its fields."""
 
     def __init__(self, driver: RobotDriver, params: Params, pose: tuple[float, float, float], t: float = 0.0,
-                 seed: int = 0, boot_epoch: int | None = None, contingency: Contingency | None = None) -> None:
+                 seed: int = 0, boot_epoch: int | None = None, contingency: Contingency | None = None,
+                 on_epoch: Callable[[int], str | None] | None = None) -> None:
         """``boot_epoch``: the first epoch to issue, drawn at boot by a real-time vehicle (``vehicle.epochs``);
         None derives it from ``seed``, as only the lockstep simulator may (§3.1). ``contingency``: a link-loss
-        behaviour to fly instead of the return plan (the simulator's baselines)."""
+        behaviour to fly instead of the return plan (the simulator's baselines); ``on_epoch``: told of each epoch
+        issued, before anyone hears of it."""
         self.driver = driver
         self.home = (pose[0], pose[1])
         self.t = t
-        super().__init__(params, seed, contingency, boot_epoch)
+        super().__init__(params, seed, contingency, boot_epoch, on_epoch)
         self.returns = ReturnDriver(self)
         self.control = ControlLoop(self, self.returns, pose, t)
         # the parts' own objects, shared: the estimator, the trail and the plan items reached (MISSION_ITEM_REACHED,
@@ -73,7 +75,9 @@ class Vehicle(Authority):
         """One 50 Hz tick (``ControlLoop.tick``): the speed and yaw rate commanded. A snapshot taken before it
         belongs to the last tick, one taken during it (an injected contingency's) to this one so far."""
         self._ticks += 1
-        out = self.control.tick(t)
+        dt = t - self.t
+        self.t = t
+        out = self.control.tick(t, dt)
         self._ticks += 1
         return out
 
@@ -88,7 +92,8 @@ class Vehicle(Authority):
         s = self._status
         svc = self.returns.service
         if (s is not None and self._status_tick == self._ticks and s.book is self.book and s.pose is pose
-                and s.block is svc and s.armed == self.armed and s.holding == self.holding):
+                and s.block is svc and s.armed == self.armed and s.holding == self.holding
+                and s.setpoint is self.setpoint and s.commands_rejected == self.commands_rejected):
             return s
         r = c.readings
         fix = r.fix if r is not None else None
@@ -100,7 +105,8 @@ class Vehicle(Authority):
             self.holding, cont is not None and cont.holding, self.state(), self.home, self.driver.mav_type,
             self.book, c.link_is_good, c.outbound_speed, c.command_out, svc,
             self.returns.displacement(pose.x, pose.y) if running else 0.0,
-            self.returns.route_remaining() if running else 0.0, c.trail.count)
+            self.returns.route_remaining() if running else 0.0, c.trail.count, self.returns.index, self.setpoint,
+            self.commands_rejected, c.stale_commands_executed)
         self._status_tick = self._ticks
         return s
 
@@ -129,6 +135,16 @@ class Vehicle(Authority):
     def trail_points(self):
         """The breadcrumb trail's points (estimate frame), oldest first: an (n, 2) copy."""
         return self.trail.points()
+
+    def crumbs(self) -> Crumbs:
+        """The breadcrumb trail's points, times and link tags (estimate frame), oldest first: copies."""
+        trail = self.trail
+        return Crumbs(trail.points(), trail.times(), trail.link_good())
+
+    def log(self, since: int = 0) -> tuple[LeaseEvent, ...]:
+        """Every lease transition since boot from the ``since``-th on (never drained)."""
+        log = self.event_log
+        return tuple(log[since:]) if since < len(log) else ()
 
     def linkmap_cells(self) -> list:
         """The owner's link over space, cell by cell, for the file a station fetches."""

@@ -40,14 +40,16 @@ class Authority:
 
     t: float  # the vehicle's clock: a teleop setpoint lives SETPOINT_TTL from now
 
-    def __init__(self, params: Params, seed: int, contingency: Contingency | None, boot_epoch: int | None) -> None:
+    def __init__(self, params: Params, seed: int, contingency: Contingency | None, boot_epoch: int | None,
+                 on_epoch: Callable[[int], str | None] | None = None) -> None:
         """``boot_epoch``: the first epoch to issue, drawn at boot by a real-time vehicle (``vehicle.epochs``);
         None derives it from ``seed``, as only the lockstep simulator may (§3.1). ``contingency``: a link-loss
-        behaviour to fly instead of the return plan (the simulator's baselines)."""
+        behaviour to fly instead of the return plan (the simulator's baselines). ``on_epoch``: told of each epoch
+        issued, before anyone hears of it (a problem it answers is announced)."""
         self.params = params
         self.seed = seed
         self.contingency = contingency
-        self.on_epoch: Callable[[int], str | None] | None = None  # told of each epoch issued, before its ACK
+        self.on_epoch = on_epoch
         self.book = LeaseBook(LeaseConfig.from_params(params), plan=self._blocks(default_plan(params)),
                               last_epoch=None if boot_epoch is None else epoch_before(boot_epoch))
         self.plan_items: tuple[PlanItem, ...] = ()  # the uploaded return plan (empty: the default plan)
@@ -90,14 +92,14 @@ class Authority:
             return True
         return False
 
-    def verdict(self, sender: int) -> Check:
+    def verdict(self, sender: int, compid: int | None = None, t: float | None = None) -> Check:
         """What the lease rules say of a state change from ``sender`` under its last claimed lease now; nothing is
-        done or counted."""
-        return self.book.check(sender)
-
-    def grants(self, sender: int, compid: int, t: float) -> bool:
-        """Whether LEASE_AUTOGRANT would make ``sender`` the owner now; nothing is granted."""
-        return sender != self.book.owner and self.book.admit(sender, compid, t, self.seed).book.owner == sender
+        done or counted. Given ``compid`` and ``t``, as after LEASE_AUTOGRANT: a plain client it would make the
+        owner now is answered under the lease it would get (the book's ``admit`` is a value: nothing is granted)."""
+        book = self.book
+        if compid is not None and t is not None and not self.key_bound:
+            book = book.admit(sender, compid, t, self.seed).book
+        return book.check(sender)
 
     def _reject(self, chk: Check) -> Check:
         self.commands_rejected += 1
@@ -114,7 +116,14 @@ class Authority:
         self.apply(self.book.admit(sender, compid, t, self.seed))
 
     # ----- the root and the execution leases ---------------------------------------------------------------
-    def acquire(self, sender: int, compid: int, t: float, allow_takeover: bool) -> Check:
+    def operator_control(self, sender: int, compid: int, t: float, request: bool, allow_takeover: bool) -> Check:
+        """MAV_CMD_REQUEST_OPERATOR_CONTROL: take the root (``request``; ``allow_takeover`` says whether another
+        station may take it over from then on) or give it up."""
+        if request:
+            return self._acquire(sender, compid, t, allow_takeover)
+        return self._release(sender, t)
+
+    def _acquire(self, sender: int, compid: int, t: float, allow_takeover: bool) -> Check:
         why = self.book.take_refusal(sender, t)
         if why is not None:
             return self._reject(refused(RejectReason.NOT_IN_CONTROL, why))
@@ -125,7 +134,7 @@ class Authority:
         self.setpoint = None
         return Check(Verdict.EXECUTE, self.book.current_id)
 
-    def release(self, sender: int, t: float) -> Check:
+    def _release(self, sender: int, t: float) -> Check:
         if self.book.owner != sender:
             return self._reject(refused(RejectReason.NOT_IN_CONTROL, "not the owner"))
         self.apply(self.book.release(sender, t))
@@ -138,8 +147,11 @@ class Authority:
     def expire(self, sender: int, epoch: int, index: int, t: float) -> Check:
         return self._answer(*self.book.expire(sender, epoch, index, t))
 
-    def rtl(self, sender: int, compid: int, t: float) -> Check:
-        """RTL button or RTL mode: OPERATOR_EXPIRE of the operator lease, so the return plan runs."""
+    def rtl(self, sender: int, compid: int, t: float, items: tuple[PlanItem, ...] = ()) -> Check:
+        """RTL button or RTL mode: OPERATOR_EXPIRE of the operator lease, so the return plan runs; with ``items``
+        (MAV_CMD_NAV_RETURN_TO_LINK as a command), those run now as one return block (``_return_now``)."""
+        if items:
+            return self._return_now(items, sender, compid, t)
         self.admit(sender, compid, t)
         return self._answer(*self.book.expire_current(sender, t))
 
@@ -171,6 +183,11 @@ class Authority:
         self._execute(payload, chk.lease, sender)
         return chk
 
+    def drop_setpoint(self) -> None:
+        """The tick found the setpoint spent (stale, its lease gone, a return drives): none drives until the operator
+        sends one."""
+        self.setpoint = None
+
     def _execute(self, payload: tuple, lease: LeaseId | None, sender: int) -> None:
         """What an executed command does: ``("teleop", speed, yaw_rate)``, ``("hold",)`` or ``("arm", on)``."""
         kind = payload[0]
@@ -188,10 +205,6 @@ class Authority:
                 self.setpoint = None
 
     # ----- the return plan and the parameters --------------------------------------------------------------
-    def plan_leases(self) -> int:
-        """How many execution leases the stored return plan makes."""
-        return len(self.book.plan)
-
     def set_plan(self, items: tuple[PlanItem, ...], t: float) -> str | None:
         """A mission upload is the return plan: scheduled as leases behind the operator lease. Returns why not."""
         try:
@@ -204,7 +217,7 @@ class Authority:
         self.apply(self.book.schedule_plan(self._blocks(blocks), t))
         return None
 
-    def return_now(self, items: tuple[PlanItem, ...], sender: int, compid: int, t: float) -> Check:
+    def _return_now(self, items: tuple[PlanItem, ...], sender: int, compid: int, t: float) -> Check:
         """MAV_CMD_NAV_RETURN_TO_LINK as a command: run these items as one return block now; the stored plan
         stays the one re-armed afterwards."""
         self.admit(sender, compid, t)

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Protocol
 from vehicle.lease import ExecutionLease, ExpireReason, LeaseBook, Outcome, ServiceBlock
 from vehicle.lease_terms import State
 from vehicle.navigation import FollowerConfig
-from vehicle.port import VehiclePort
+from vehicle.port import Snapshot, VehiclePort
 from vehicle.returning import Way
 from vehicle.service import NAV_LOITER_TIME, NAV_WAYPOINT, ServiceState, ServiceStep
 from vehicle.service import displacement as block_displacement
@@ -39,13 +39,12 @@ class Onboard(VehiclePort, Protocol):
     """The vehicle as a return is driven on it, from inside the core: what ``ReturnDriver`` reads and changes of
     it. ``vehicle.app.Vehicle`` is the vehicle; it is named here as a protocol, below it, so that the parts it is
     made of (this module and ``vehicle.control``) do not import it back (docs/architecture.md §2). An injected
-    ``Contingency`` is outside the core and sees only the port (``VehiclePort``)."""
+    ``Contingency`` is outside the core and sees only the port's snapshot face (``Snapshot``)."""
 
     params: Params
-    book: LeaseBook  # the current book: a transition replaces it, through ``apply`` or directly
+    book: LeaseBook  # the current book: a transition replaces it, through ``apply``
     contingency: Contingency | None  # None: the return plan's blocks drive
     linkmap: LinkMap
-    notices: list[str]  # announced by the endpoint
     armed: bool
     home: tuple[float, float]
     station_heard_at: float | None  # a station other than the owner, last heard (trusted frames only)
@@ -68,16 +67,17 @@ class Contingency(Protocol):
     The one door for comparing link-loss behaviours on this very vehicle (§9): the lease book, its triggers,
     telemetry and MAVLink stay exactly as they are, only the driving during a return differs. The simulator's
     baselines (hold, straight-line RTL, SmartRTL, back-up) implement it; a robot leaves it None. It is handed the
-    vehicle's port, as every room outside the core is: it reads the status snapshot and changes nothing.
+    port's snapshot face (``vehicle.port.Snapshot``), as every room outside the core is handed the face it uses: it
+    reads and changes nothing.
     """
 
     halts_on_regain: bool  # False: LINK_REGAINED does not end the running block (it runs to its own end)
     holding: bool  # True while its rules keep the robot standing still (reported as HOLDING, not RETURNING)
 
-    def observe(self, vehicle: VehiclePort, t: float) -> None:
+    def observe(self, vehicle: Snapshot, t: float) -> None:
         """Every tick, after the estimator: a behaviour that keeps its own memory (SmartRTL's path) records."""
 
-    def drive(self, vehicle: VehiclePort, t: float, x: float, y: float, yaw: float) -> tuple[float, float,
+    def drive(self, vehicle: Snapshot, t: float, x: float, y: float, yaw: float) -> tuple[float, float,
                                                                                            ExpireReason | None]:
         """One tick of the current service lease: speed, yaw rate, and why the block ended (None: running)."""
 
@@ -224,7 +224,7 @@ class ReturnDriver:
         v = self.vehicle
         self.faults += 1
         self.service, self.index = None, None
-        v.notices.append(f"return service fault in lease {index}: {type(error).__name__}: {error}; "
+        v.announce(f"return service fault in lease {index}: {type(error).__name__}: {error}; "
                          f"block ended, holding")
         v.apply(v.book.finish(index, ExpireReason.STUCK, t))
         return 0.0, 0.0

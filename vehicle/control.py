@@ -37,13 +37,16 @@ def _beams(scan) -> int:
 
 
 class Ticking(Onboard, Protocol):
-    """The vehicle as its tick reads and changes it (``vehicle.app.Vehicle``, named here as a protocol so this
-    module does not import it back): what a return sees of it (``Onboard``), and the clock, the robot, the operator's
-    setpoint and the radio's report."""
+    """The vehicle as its tick reads it (``vehicle.app.Vehicle``, named here as a protocol so this module does not
+    import it back): what a return sees of it (``Onboard``), and the robot, the operator's setpoint and the radio's
+    report. The tick changes none of its fields: the vehicle keeps its own clock (``Vehicle.tick``), and a setpoint
+    the tick finds spent is dropped by the vehicle that holds it (``drop_setpoint``)."""
 
-    t: float  # the time of the last tick
     driver: RobotDriver
     setpoint: Setpoint | None  # the operator's; None once it is stale or its lease is gone
+
+    def drop_setpoint(self) -> None:
+        """The setpoint is spent (stale, its lease gone, a return drives): none drives until the operator sends one."""
 
     def link_good(self, t: float) -> bool:
         """The link tag of a crumb laid now."""
@@ -75,11 +78,10 @@ class ControlLoop:
         self.stale_commands_executed = 0  # setpoints the actuator guard caught outside the current lease: must be 0
         # the (book, setpoint) pair the teleop guards last passed (see ``_teleop``)
 
-    def tick(self, t: float) -> tuple[float, float]:
-        """Sensors -> estimator -> trail; lease triggers; the current lease's commands -> actuators."""
+    def tick(self, t: float, dt: float) -> tuple[float, float]:
+        """Sensors -> estimator -> trail; lease triggers; the current lease's commands -> actuators (``dt``: the time
+        since the last tick)."""
         v = self.vehicle
-        dt = t - v.t
-        v.t = t
         r = v.driver.read(t, dt if dt > 1e-6 else 1e-6)
         self.readings = r
         est = self.estimator
@@ -140,7 +142,7 @@ class ControlLoop:
         if cur is None or cur.holder is Holder.OPERATOR:
             self.returns.stand_down()
             return self._teleop(t)
-        self.vehicle.setpoint = None
+        self.vehicle.drop_setpoint()
         return self.returns.drive(t, cur, x, y, yaw, self.trail, self.estimator, self.outbound_speed, self.free,
                                   self.sweep)
 
@@ -151,20 +153,20 @@ class ControlLoop:
         if sp is None:
             return 0.0, 0.0
         if t > sp.until:
-            v.setpoint = None
+            v.drop_setpoint()
             return 0.0, 0.0
         book = v.book
         # both guards run every tick the setpoint drives: a safety check is never cached (issue 29; skipping them
         # for a book and setpoint already cleared saved 1.5 % of the tick)
         if book.check(book.owner or 0, sp.lease).verdict is not Verdict.EXECUTE:
             # the lease this setpoint was sent under is gone: it must not drive the robot any more
-            v.setpoint = None
+            v.drop_setpoint()
             return 0.0, 0.0
         cur = book.current
         if cur is None or book.epoch is None or sp.lease.index != cur.index:
             # a last guard at the actuator, independent of how the setpoint got here: never drive on it
             self.stale_commands_executed += 1
-            v.setpoint = None
+            v.drop_setpoint()
             return 0.0, 0.0
         if abs(sp.speed) > OUTBOUND_MIN_STICK and self.readings is not None:
             self.outbound_speed += OUTBOUND_GAIN * (abs(self.readings.speed) - self.outbound_speed)

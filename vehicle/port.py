@@ -1,19 +1,25 @@
 """The one door into the vehicle core (docs/architecture.md §2 "Ports, not a hub").
 
 Whoever talks to the core (the MAVLink services of ``vehicle/services/``, the companion of ``vehicle/companion/``,
-the simulator's link-loss baselines in ``sim/policies/``) holds a ``VehiclePort``, never the ``Vehicle`` class, and
-sees three things through it:
+the simulator's link-loss baselines in ``sim/policies/`` and its record of a run) holds a ``VehiclePort``, never the
+``Vehicle`` class. The port is three small faces, each a Protocol of its own with at most 12 public members
+(``tests/test_port.py`` counts them), so a part can be handed, and a test can fake, just the face it uses:
 
-- **the command authority**: every state-changing request (take or give up the root, claim or expire a lease, arm,
-  hold, teleop, a return plan, a parameter) is a method that the lease book decides and that answers with a verdict
-  (``Check``) or a reason (``str``). Nobody outside asks the book itself, nobody changes a field;
-- **a status snapshot** (``Status``): an immutable value of what the vehicle is and knows, taken once per tick and
-  retaken only when a command changed the lease book, the arming or the hold in between, so an answer sent between
-  two ticks never shows a lease that is already gone;
-- **an event queue** the core owns (``Announcements``): the lease transitions, the notices and the plan items
-  reached since the endpoint's services last drained them. Draining is the only way they leave.
+- **the command authority** (``CommandAuthority``): every state-changing request of a ground station (take or give
+  up the root, claim or expire a lease, arm, hold, teleop, return, a return plan, a parameter) is a method that the
+  lease book decides and that answers with a verdict (``Check``) or a reason (``str``). Nobody outside asks the book
+  itself, nobody changes a field;
+- **the status snapshot** (``Snapshot``): ``status()``, an immutable value of what the vehicle is and knows
+  (``Status``), taken once per tick and retaken only when a command changed the lease book, the arming, the hold or
+  the setpoint in between, so an answer sent between two ticks never shows a lease that is already gone; and the
+  other reads (the parameters, the trail, the link map), each a copy;
+- **the event queue** (``EventQueue``): what the core is told happened outside it (a frame heard, the radio's
+  signal, the robot's own arming, a refusal or a key installed elsewhere, the robot taken from its hands) and what
+  it has to announce (``Announcements``: the lease transitions, the notices, the plan items reached) since the
+  endpoint's services last drained them. Draining is the only way they leave; ``log`` keeps every transition for an
+  observer of the whole run.
 
-``vehicle.app.Vehicle`` provides it. This module imports only values (no part of the vehicle that could import it
+``vehicle.app.Vehicle`` provides all three. This module imports only values (no part of the vehicle that could import it
 back), so every room can name the port without tying itself to the core's composition.
 """
 
@@ -26,6 +32,7 @@ import numpy as np
 from vehicle.estimator import Pose
 from vehicle.lease import Check, ExpireReason, LeaseBook, LeaseEvent
 from vehicle.service import PlanItem, ServiceState
+from vehicle.teleop import Setpoint
 
 DT = 0.02  # the control tick: 50 Hz (the tick is ``vehicle.control.ControlLoop``; every loop that drives one uses it)
 
@@ -61,6 +68,19 @@ class Status(NamedTuple):
     displacement: float  # how far the running block has taken the robot from where it started (0: none runs)
     route_remaining: float  # metres of the running block's route still ahead (0: none)
     trail_points: int  # crumbs in the breadcrumb trail
+    # what an observer of the whole run needs besides (the simulator's record, metrics and verdict)
+    block_index: int | None  # the lease the running block belongs to (None: none runs)
+    setpoint: Setpoint | None  # the operator's teleop setpoint in force (None: none, stale, or its lease gone)
+    commands_rejected: int  # state changes refused since boot: each one answered and counted
+    stale_commands: int  # setpoints the actuator's last guard caught outside the current lease: must stay 0
+
+
+class Crumbs(NamedTuple):
+    """The breadcrumb trail as a reader gets it: copies, oldest first, the newest crumb included (estimate frame)."""
+
+    points: np.ndarray  # (n, 2)
+    times: np.ndarray  # (n,) when each was laid
+    link_good: np.ndarray  # (n,) its link tag
 
 
 class Announcements(NamedTuple):
@@ -81,33 +101,32 @@ class ParamReader(Protocol):
     def names(self) -> list[str]: ...
 
 
-class VehiclePort(Protocol):
-    """The vehicle core as every room outside it sees it (see the module docstring)."""
+class CommandAuthority(Protocol):
+    """Face (a): may this sender do this now, under the current lease? Every method is a ground station's request,
+    decided by the lease book, answered with a verdict (``Check``) or a reason, and every refusal is counted."""
 
-    # ----- the command authority: the lease book decides, the answer is a verdict --------------------------------
     def refuses(self, sender: int) -> bool:
         """Someone else owns the vehicle: a state change from ``sender`` is refused (and counted)."""
 
     def admit(self, sender: int, compid: int, t: float) -> None:
         """A plain client's state-changing command may grant it the root (LEASE_AUTOGRANT)."""
 
-    def verdict(self, sender: int) -> Check:
+    def verdict(self, sender: int, compid: int | None = None, t: float | None = None) -> Check:
         """What the lease rules say of a state change from ``sender`` under its last claimed lease now, without
-        doing anything (a companion's router forwards on EXECUTE)."""
+        doing or counting anything (a companion's router forwards on EXECUTE). Given ``compid`` and ``t``, a plain
+        client that LEASE_AUTOGRANT would make the owner now is answered EXECUTE under the lease it would get."""
 
-    def grants(self, sender: int, compid: int, t: float) -> bool:
-        """Whether LEASE_AUTOGRANT would make ``sender`` the owner now, without granting it."""
-
-    def acquire(self, sender: int, compid: int, t: float, allow_takeover: bool) -> Check: ...
-
-    def release(self, sender: int, t: float) -> Check: ...
+    def operator_control(self, sender: int, compid: int, t: float, request: bool, allow_takeover: bool) -> Check:
+        """MAV_CMD_REQUEST_OPERATOR_CONTROL: take the root lease (``request``, a takeover by another station
+        allowed or not from then on) or give it up."""
 
     def claim(self, sender: int, epoch: int, index: int, t: float) -> Check: ...
 
     def expire(self, sender: int, epoch: int, index: int, t: float) -> Check: ...
 
-    def rtl(self, sender: int, compid: int, t: float) -> Check:
-        """RTL button or mode: OPERATOR_EXPIRE of the operator lease, so the return plan runs."""
+    def rtl(self, sender: int, compid: int, t: float, items: tuple[PlanItem, ...] = ()) -> Check:
+        """RTL button or mode: OPERATOR_EXPIRE of the operator lease, so the return plan runs; with ``items``
+        (MAV_CMD_NAV_RETURN_TO_LINK as a command) those run now as one block, the stored plan re-armed after."""
 
     def take_manual(self, sender: int, compid: int, t: float) -> Check:
         """A manual mode (or HOLD) takes the operator lease back, if the sender owns the vehicle."""
@@ -116,47 +135,26 @@ class VehiclePort(Protocol):
         """A standard state change under the sender's last claimed lease: ``("teleop", speed, yaw_rate)``,
         ``("hold",)`` or ``("arm", on)``."""
 
-    def return_now(self, items: tuple[PlanItem, ...], sender: int, compid: int, t: float) -> Check: ...
-
     def set_plan(self, items: tuple[PlanItem, ...], t: float) -> str | None:
-        """The return plan uploaded: why not, or None."""
+        """The return plan uploaded (by the owner: the caller asked ``refuses``): why not, or None."""
 
-    def set_plan_start(self, seq: int, sender: int, compid: int, t: float) -> str | None: ...
-
-    def plan_leases(self) -> int:
-        """How many execution leases the stored return plan makes."""
+    def set_plan_start(self, seq: int, sender: int, compid: int, t: float) -> str | None:
+        """MISSION_SET_CURRENT: the return plan scheduled from item ``seq`` on; why not, or None."""
 
     def set_param(self, name: str, value: float) -> float:
-        """Store a parameter and apply it at once (``ParamError`` leaves the old value)."""
+        """Store a parameter and apply it at once (by the owner: the caller asked ``refuses``; ``ParamError``
+        leaves the old value)."""
 
-    def preempt(self, t: float, reason: ExpireReason, why: str) -> bool:
-        """The robot left the vehicle's hands from outside the book (a companion's autopilot): the current lease
-        and its chain end. True if a lease ended."""
 
-    def refused(self) -> None:
-        """Count a state change refused outside the lease book (the signing gate, a companion's router): every
-        refusal is counted, never silent."""
+class Snapshot(Protocol):
+    """Face (b): what the vehicle is and knows, read only (see ``Status``); every read is a value or a copy."""
 
-    def robot_armed(self, armed: bool) -> None:
-        """The robot reports its own arming (a companion's autopilot arms itself): the vehicle follows it."""
-
-    def bind_key(self) -> None:
-        """A signing key is installed: from now on the root only by an explicit signed request (§4.1)."""
-
-    # ----- what the vehicle hears ---------------------------------------------------------------------------------
-    def heard(self, sysid: int, t: float, seq: int | None = None) -> None:
-        """A trusted frame from ``sysid`` with sequence number ``seq``: the owner's feed its link watch."""
-
-    def radio_rssi(self, dbm: float, t: float | None = None) -> None:
-        """The vehicle's radio reports the owner's signal strength (never decides a loss or a regain)."""
-
-    # ----- reads --------------------------------------------------------------------------------------------------
     def status(self) -> Status:
-        """The snapshot of now (see ``Status``)."""
+        """The snapshot of now (see ``Status``). How many lease plan blocks are stored: ``len(status().book.plan)``."""
 
     @property
     def params(self) -> ParamReader:
-        """The parameter table, to read (a change goes through ``set_param``)."""
+        """The parameter table, to read (a change goes through ``CommandAuthority.set_param``)."""
 
     def param_values(self) -> dict[str, float]:
         """Every parameter's value now, a copy (what a .parm file keeps)."""
@@ -164,10 +162,39 @@ class VehiclePort(Protocol):
     def trail_points(self) -> np.ndarray:
         """The breadcrumb trail's points (estimate frame), oldest first: an (n, 2) copy."""
 
+    def crumbs(self) -> Crumbs:
+        """The breadcrumb trail's points, times and link tags (estimate frame), oldest first: copies."""
+
     def linkmap_cells(self) -> list:
         """The owner's link over space, cell by cell (``vehicle.linkmap``), for the file a station fetches."""
 
-    # ----- the event queue ----------------------------------------------------------------------------------------
+
+class EventQueue(Protocol):
+    """Face (c): what the core is told happened outside it, and what it has to announce (see the module docstring).
+    Nothing told here is a request: no verdict answers it."""
+
+    # ----- told: what happened outside the core ----------------------------------------------------------------
+    def heard(self, sysid: int, t: float, seq: int | None = None) -> None:
+        """A trusted frame from ``sysid`` with sequence number ``seq``: the owner's feed its link watch."""
+
+    def radio_rssi(self, dbm: float, t: float | None = None) -> None:
+        """The vehicle's radio reports the owner's signal strength (never decides a loss or a regain)."""
+
+    def robot_armed(self, armed: bool) -> None:
+        """The robot reports its own arming (a companion's autopilot arms itself): the vehicle follows it."""
+
+    def preempt(self, t: float, reason: ExpireReason, why: str) -> bool:
+        """The robot left the vehicle's hands from outside the book (a companion's autopilot): the current lease
+        and its chain end. True if a lease ended."""
+
+    def refused(self) -> None:
+        """A state change was refused outside the lease book (the signing gate, a companion's router): counted,
+        as every refusal is, never silent."""
+
+    def bind_key(self) -> None:
+        """A signing key was installed: from now on the root only by an explicit signed request (§4.1)."""
+
+    # ----- announced: drained by the endpoint, logged for an observer ------------------------------------------
     def announce(self, text: str) -> None:
         """A notice for the ground stations (STATUSTEXT), queued with the core's own."""
 
@@ -176,3 +203,12 @@ class VehiclePort(Protocol):
 
     def drain_reached(self) -> tuple[int, ...]:
         """The plan items reached since the last drain (MISSION_ITEM_REACHED), oldest first; then none."""
+
+    def log(self, since: int = 0) -> tuple[LeaseEvent, ...]:
+        """Every lease transition since boot from the ``since``-th on, oldest first: the record of an observer of the
+        whole run (the simulator's), which draining never empties."""
+
+
+class VehiclePort(CommandAuthority, Snapshot, EventQueue, Protocol):
+    """The three faces together: what a part that needs all of them holds (the endpoint's services, the companion).
+    It adds nothing of its own."""

@@ -27,7 +27,7 @@ from sim.compare import Repeatability
 from sim.robots import Robot
 from sim.scenario import Event, Station
 from sim.world import World
-from vehicle.app import Vehicle
+from vehicle.core import Core
 
 
 class Plant(Protocol):
@@ -55,9 +55,10 @@ class Plant(Protocol):
     rows: list[tuple] | None  # the plant's own per-tick rows (t, true x, true y, est x, est y, ...), or None
     stale: int  # actuations its own audit found outside the lease (the companion's router: frames it forwarded)
     repeatability: Repeatability  # how far two runs of one trial may differ (``sim.compare``; exact for a native one)
+    contingency: Any  # the link-loss baseline (``sim.policies``) its vehicle flies instead of the return plan, or None
 
     @property
-    def vehicle(self) -> Vehicle | None:
+    def vehicle(self) -> Core | None:
         """returnlink's vehicle aboard, whose leases the run records; None: none (or not booted yet)."""
 
     # ----- the scenario around it ----------------------------------------------------------------------------

@@ -35,6 +35,7 @@ class AutopilotPlant:
     vehicle = None  # no returnlink aboard
     stale = 0  # no lease to audit against
     repeatability = metrics.REPEATABILITY  # within the autopilot's own determinism (its threads, its timing)
+    contingency = None  # no returnlink aboard, so no baseline flown in its place
 
     kind: str
     policies: tuple[str, ...]

@@ -65,6 +65,7 @@ class CompanionSide:
     ``WORDS`` names the autopilot in the summary; ``FAILURE`` is its run's error."""
 
     leases = True
+    contingency = None  # the companion flies its return plan, never a baseline
     # (the autopilot as the summary's first line names it, where the companion sits, "to X", "X's", the modes)
     WORDS = ("firmware {version}", "telemetry port", "the firmware", "the firmware's", "firmware modes")
     FAILURE: type[Exception] = RuntimeError
@@ -78,6 +79,8 @@ class CompanionSide:
         self._parser.robust_parsing = True
         self.forwarded = 0  # ground frames the companion passed to the autopilot
         self.stale = 0  # of those, the ones the run's audit of the router found outside the operator's lease
+        self._events_read = 0  # the companion's lease transitions the audit has read (``EventQueue.log``)
+        self._last_event = None  # ... and the last of them: the lease last announced
         self.air_radio = RadioReport()  # the vehicle-side telemetry radio: its own sequence numbers
         # the native rover's lidar, through its driver on the vehicle (OBSTACLE_DISTANCE, issue 41)
         self.lidar = Lidar(self.world, self.robot, subsystem_rng(self.seed, "lidar"))
@@ -150,12 +153,18 @@ class CompanionSide:
         frame that drives the robot or changes its mode must come from the owner while the lease last announced
         (LEASE_EVENT) is an operator's."""
         v = self.vehicle
-        if v is None or not v.event_log:
+        if v is None:
+            return
+        new = v.log(self._events_read)  # (the lease transitions since the last audit: most frames, none)
+        if new:
+            self._events_read += len(new)
+            self._last_event = new[-1]
+        if self._last_event is None:
             return
         for m in self._parser.parse_buffer(data) or ():
             if m.get_type() == "BAD_DATA" or router.authority(m) not in AUDITED:
                 continue
-            if v.event_log[-1].holder is not Holder.OPERATOR or m.get_srcSystem() != v.book.owner:
+            if self._last_event.holder is not Holder.OPERATOR or m.get_srcSystem() != v.status().book.owner:
                 self.stale += 1
 
     # ----- the record ------------------------------------------------------------------------------------------
@@ -164,7 +173,7 @@ class CompanionSide:
         v = self.vehicle
         if v is None:
             return self._autopilot_estimate()
-        p = v.estimator.pose
+        p = v.status().pose
         ox, oy = self.frame_offset
         return ox + p.x, oy + p.y
 
@@ -173,9 +182,10 @@ class CompanionSide:
         v = self.vehicle
         if v is None:
             return f"{super().status()}  companion booting"
-        cur = v.book.current
+        s = v.status()
+        cur = s.book.current
         holder = "none" if cur is None else cur.holder.name.lower()
-        return f"{super().status()}  lease {STATE_NAMES.get(v.state(), '?')} ({holder})"
+        return f"{super().status()}  lease {STATE_NAMES.get(s.state, '?')} ({holder})"
 
     def range_words(self) -> str:
         """What the companion heard of the rover's range data, for the summary."""

@@ -1,5 +1,5 @@
-"""The native plant: returnlink's own vehicle (``vehicle.app.Vehicle`` behind its MAVLink endpoint) on the scenario's
-pymunk robot, its sensors and a link-loss policy (``sim.policies``), for ``sim.runner.Run``.
+"""The native plant: returnlink's own vehicle (booted by ``vehicle.core.boot_core``, behind its MAVLink endpoint) on
+the scenario's pymunk robot, its sensors and a link-loss policy (``sim.policies``), for ``sim.runner.Run``.
 
 It has no clock of its own: tick k is at k / TICK_RATE, as fast as the machine allows. In each tick the vehicle
 first reads what the radio delivered, ticks, and the physics steps; the loop's radio then carries the frames of the
@@ -24,7 +24,7 @@ from sim.operator import Operator
 from sim.policies import check_policy, make_policy
 from sim.scenario import Event, Scenario, Station
 from sim.summary import summary
-from vehicle.app import DT
+from vehicle.core import DT
 
 # Tick k is at k / TICK_RATE s: the double nearest k * DT, which is what rounding the running sum to 9 decimals
 # every tick gave (for DT = 1/50 s the sum strays from k / 50 by far less than 1e-9 for days of ticks), at the
@@ -50,11 +50,10 @@ class NativePlant:
         served vehicle boots with and keeps (``sim.serve.served_boot``); a lockstep run gives none of them."""
         self.scenario = scenario
         self.kind = kind
+        self.contingency = make_policy(check_policy(policy))  # None: the return plan flies
         self.driver, self.vehicle, self.endpoint = simulated_vehicle(scenario, kind, seed, param_file, boot_epoch,
-                                                                     contingency=make_policy(check_policy(policy)),
+                                                                     contingency=self.contingency, on_epoch=on_epoch,
                                                                      **endpoint_options)
-        if on_epoch is not None:
-            self.vehicle.on_epoch = on_epoch
         self.world = self.driver.world
         self.robot = self.driver.robot
         # called every tick: bound once (the physics step's three calls are ``SimDriver.advance``'s, made here so
@@ -142,7 +141,7 @@ class NativePlant:
 
     # ----- the record: the loop's trace holds all of it -------------------------------------------------------
     def estimate(self) -> tuple[float, float]:
-        p = self.vehicle.estimator.pose
+        p = self.vehicle.status().pose
         return p.x, p.y
 
     def record(self, t: float, pos: tuple[float, float], link: float, rssi: float) -> None:
@@ -150,7 +149,7 @@ class NativePlant:
 
     def status(self) -> str:
         """The mode the vehicle shows (its heartbeat's custom_mode) and who owns it."""
-        return f"  state {self.endpoint.custom_mode():#010x}  owner {self.vehicle.book.owner}"
+        return f"  state {self.endpoint.custom_mode():#010x}  owner {self.vehicle.status().book.owner}"
 
     def started(self) -> str:
         return ""

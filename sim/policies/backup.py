@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from sim.policies.base import Baseline, Command, PathDriver, return_speed
-from vehicle.port import VehiclePort
+from vehicle.port import Snapshot
 
 
 class Backup(Baseline):
@@ -24,7 +24,7 @@ class Backup(Baseline):
         self.driver: PathDriver | None = None
         self.after_loss = True  # False: an operator's RTL over a good link, which backs up the whole trail
 
-    def begin(self, vehicle: VehiclePort, t: float, x: float, y: float) -> None:
+    def begin(self, vehicle: Snapshot, t: float, x: float, y: float) -> None:
         super().begin(vehicle, t, x, y)
         trail = vehicle.trail_points()
         self.route = np.vstack([[[x, y]], trail[::-1]]) if len(trail) else np.array([[x, y]])
@@ -32,7 +32,7 @@ class Backup(Baseline):
         self.driver = PathDriver(self.route, return_speed(vehicle), t)
         self.after_loss = vehicle.status().book.link.lost
 
-    def tick(self, vehicle: VehiclePort, t: float, x: float, y: float, yaw: float) -> Command:
+    def tick(self, vehicle: Snapshot, t: float, x: float, y: float, yaw: float) -> Command:
         assert self.driver is not None
         if self.after_loss and vehicle.status().link_good:
             self.driver.last_progress_at = t  # standing still on purpose is not being stuck

@@ -15,7 +15,7 @@ import numpy as np
 
 from vehicle.lease import ExpireReason
 from vehicle.navigation import FollowerConfig, Path, follow
-from vehicle.port import VehiclePort
+from vehicle.port import Snapshot
 from vehicle.service import STUCK_AFTER
 
 Command = tuple[float, float, ExpireReason | None]
@@ -32,7 +32,7 @@ class PathDriver:
         self.best_remaining = math.inf
         self.last_progress_at = t
 
-    def step(self, vehicle: VehiclePort, t: float, x: float, y: float, yaw: float) -> Command:
+    def step(self, vehicle: Snapshot, t: float, x: float, y: float, yaw: float) -> Command:
         if self.path is None:
             return 0.0, 0.0, ExpireReason.COMPLETED
         cmd = follow(self.path, x, y, yaw, self.progress, self.speed,
@@ -47,16 +47,16 @@ class PathDriver:
         return cmd.speed, cmd.yaw_rate, None
 
 
-def return_speed(vehicle: VehiclePort) -> float:
+def return_speed(vehicle: Snapshot) -> float:
     """RTL_SPEED, or the speed driven outbound: the same rule the returnlink service uses."""
     return vehicle.params["RTL_SPEED"] or vehicle.status().outbound_speed or 1.0
 
 
 class Baseline:
-    """A ``vehicle.contingency.Contingency`` run once per return chain, on the vehicle's port (``vehicle.port``).
-    Subclasses say how a return starts (``begin``) and how each tick goes (``tick``); ``route`` and ``target``
-    (estimate frame) are kept for the plots, and ``acted`` holds when each return took over the robot (for
-    SmartRTL, FS_TIMEOUT after the lease did)."""
+    """A ``vehicle.contingency.Contingency`` run once per return chain, on the port's snapshot face
+    (``vehicle.port.Snapshot``). Subclasses say how a return starts (``begin``) and how each tick goes (``tick``);
+    ``route`` and ``target`` (estimate frame) are kept for the plots, and ``acted`` holds when each return took over
+    the robot (for SmartRTL, FS_TIMEOUT after the lease did)."""
 
     halts_on_regain = True
     holding = False  # standing still by its rules right now (the vehicle then reports HOLDING)
@@ -68,10 +68,10 @@ class Baseline:
         self.target: tuple[float, float] | None = None
         self.acted: list[float] = []
 
-    def observe(self, vehicle: VehiclePort, t: float) -> None:
+    def observe(self, vehicle: Snapshot, t: float) -> None:
         """Nothing to record by default."""
 
-    def drive(self, vehicle: VehiclePort, t: float, x: float, y: float, yaw: float) -> Command:
+    def drive(self, vehicle: Snapshot, t: float, x: float, y: float, yaw: float) -> Command:
         cur = vehicle.status().book.current
         chain = cur.chain if cur is not None else None
         if chain != self.chain:
@@ -86,12 +86,12 @@ class Baseline:
             self.finished(vehicle, t)
         return speed, yaw_rate, finished
 
-    def begin(self, vehicle: VehiclePort, t: float, x: float, y: float) -> None:
+    def begin(self, vehicle: Snapshot, t: float, x: float, y: float) -> None:
         """A new return chain starts (one link loss, or an operator's RTL): by default the baseline acts now."""
         self.acted.append(t)
 
-    def tick(self, vehicle: VehiclePort, t: float, x: float, y: float, yaw: float) -> Command:
+    def tick(self, vehicle: Snapshot, t: float, x: float, y: float, yaw: float) -> Command:
         raise NotImplementedError
 
-    def finished(self, vehicle: VehiclePort, t: float) -> None:
+    def finished(self, vehicle: Snapshot, t: float) -> None:
         """The return ended (arrived, STUCK)."""

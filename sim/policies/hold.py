@@ -11,11 +11,11 @@ lease, which is the operator changing the mode.
 from __future__ import annotations
 
 from sim.policies.base import Baseline, Command
-from vehicle.port import VehiclePort
+from vehicle.port import Snapshot
 
 
 class Hold(Baseline):
     holding = True  # HOLD mode, the whole block
 
-    def tick(self, vehicle: VehiclePort, t: float, x: float, y: float, yaw: float) -> Command:
+    def tick(self, vehicle: Snapshot, t: float, x: float, y: float, yaw: float) -> Command:
         return 0.0, 0.0, None

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from sim.policies.base import Baseline, Command, PathDriver, return_speed
-from vehicle.port import VehiclePort
+from vehicle.port import Snapshot
 
 
 class StraightRTL(Baseline):
@@ -24,13 +24,13 @@ class StraightRTL(Baseline):
         super().__init__()
         self.driver: PathDriver | None = None
 
-    def begin(self, vehicle: VehiclePort, t: float, x: float, y: float) -> None:
+    def begin(self, vehicle: Snapshot, t: float, x: float, y: float) -> None:
         super().begin(vehicle, t, x, y)
         home = vehicle.status().home
         self.target = (float(home[0]), float(home[1]))
         self.route = np.array([[x, y], self.target])
         self.driver = PathDriver(self.route, return_speed(vehicle), t)
 
-    def tick(self, vehicle: VehiclePort, t: float, x: float, y: float, yaw: float) -> Command:
+    def tick(self, vehicle: Snapshot, t: float, x: float, y: float, yaw: float) -> Command:
         assert self.driver is not None
         return self.driver.step(vehicle, t, x, y, yaw)

@@ -26,7 +26,7 @@ import numpy as np
 
 from sim.policies.base import Baseline, Command, PathDriver, return_speed
 from vehicle.lease import ExpireReason, Holder
-from vehicle.port import VehiclePort
+from vehicle.port import Snapshot
 from vehicle.trail import douglas_peucker, seg_dist
 
 SRTL_ACCURACY = 2.0  # m
@@ -126,7 +126,7 @@ class SmartRTL(Baseline):
         self.fallback = False  # deactivated: it flew RTL instead
         self.lost_at = 0.0  # when the failsafe condition began (the block started after COMMS_LOST)
 
-    def observe(self, vehicle: VehiclePort, t: float) -> None:
+    def observe(self, vehicle: Snapshot, t: float) -> None:
         s = vehicle.status()
         p = s.pose
         cur = s.book.current
@@ -144,7 +144,7 @@ class SmartRTL(Baseline):
         """Standing still between COMMS_LOST and the failsafe acting FS_TIMEOUT later."""
         return self.returning and self.driver is None
 
-    def begin(self, vehicle: VehiclePort, t: float, x: float, y: float) -> None:
+    def begin(self, vehicle: Snapshot, t: float, x: float, y: float) -> None:
         """After a link loss SMART_RTL takes over only when the failsafe acts (``_act``); an operator's RTL (the
         mode switched by hand) takes over at once."""
         self.driver = None
@@ -157,7 +157,7 @@ class SmartRTL(Baseline):
         if not vehicle.status().book.link.lost:
             self._act(vehicle, t, x, y)
 
-    def tick(self, vehicle: VehiclePort, t: float, x: float, y: float, yaw: float) -> Command:
+    def tick(self, vehicle: Snapshot, t: float, x: float, y: float, yaw: float) -> Command:
         if self.driver is None:
             link = vehicle.status().book.link
             if not link.lost:
@@ -168,7 +168,7 @@ class SmartRTL(Baseline):
         assert self.driver is not None
         return self.driver.step(vehicle, t, x, y, yaw)
 
-    def _act(self, vehicle: VehiclePort, t: float, x: float, y: float) -> None:
+    def _act(self, vehicle: Snapshot, t: float, x: float, y: float) -> None:
         self.acted.append(t)
         if self.path.active and self.path.points:
             self.path.thorough_cleanup()
@@ -181,7 +181,7 @@ class SmartRTL(Baseline):
         self.target = (float(self.route[-1, 0]), float(self.route[-1, 1]))
         self.driver = PathDriver(self.route, return_speed(vehicle), t)
 
-    def finished(self, vehicle: VehiclePort, t: float) -> None:
+    def finished(self, vehicle: Snapshot, t: float) -> None:
         self.returning = False
         p = vehicle.status().pose
         if self.path.active and self.homed:

@@ -1,7 +1,7 @@
 """The vehicle's own actions as commands (docs/architecture.md §4): arm, modes, return to launch, return to link.
 
 Every action is a state change under the lease rules: the vehicle decides (``Vehicle.command``, ``rtl``,
-``take_manual``, ``return_now``) and this service answers with what it decided. A mode arrives in the PX4 or the
+``take_manual``) and this service answers with what it decided. A mode arrives in the PX4 or the
 ArduPilot Rover numbering (DO_SET_MODE, the SET_MODE message) or as a standard mode (DO_SET_STANDARD_MODE);
 each means one of three things here: RTL (the operator lease expires), HOLD or MANUAL. A companion computer routes
 these to its autopilot instead of composing this service.
@@ -12,7 +12,7 @@ from __future__ import annotations
 from link.modes import px4_parts
 from link.plan_items import NAV_RETURN_TO_LINK
 from vehicle.modes import decode_mode
-from vehicle.port import VehiclePort
+from vehicle.port import CommandAuthority
 from vehicle.service import PlanItem
 from vehicle.services.base import Outbox, Reply, Service, Source, command, handles, mav
 from vehicle.services.commands import answer
@@ -26,7 +26,7 @@ ARMED = 0.5  # COMPONENT_ARM_DISARM p1 at or above: arm
 class VehicleActions(Service):
     """Arm, modes and returns, each judged by the lease rules."""
 
-    def __init__(self, out: Outbox, vehicle: VehiclePort) -> None:
+    def __init__(self, out: Outbox, vehicle: CommandAuthority) -> None:
         self.out = out
         self.vehicle = vehicle
 
@@ -46,7 +46,7 @@ class VehicleActions(Service):
         # the command service already checked the parameters against link.plan_items.KINDS and filled NaN with
         # "use the parameter" values (command_values), exactly as an uploaded item is
         item = PlanItem(NAV_RETURN_TO_LINK, *p[:5])
-        chk = self.vehicle.return_now((item,), src.sysid, src.compid, t)
+        chk = self.vehicle.rtl(src.sysid, src.compid, t, (item,))
         return answer(self.out, chk, "return to link", src.sysid)
 
     @command(mav.MAV_CMD_DO_SET_MODE)

@@ -14,7 +14,7 @@ from pymavlink.dialects.v20 import development as modes_wire
 from link.wire import MAVLINK_VERSION
 from vehicle.lease_terms import State
 from vehicle.modes import AVAILABLE_MODES, custom_mode, standard_mode
-from vehicle.port import VehiclePort
+from vehicle.port import Snapshot
 from vehicle.services.base import mav
 
 MSG_ID_AVAILABLE_MODES = modes_wire.MAVLINK_MSG_ID_AVAILABLE_MODES
@@ -27,7 +27,7 @@ class Heartbeat:
 
     ``mav_type`` None: the robot's own (the status snapshot's ``mav_type``)."""
 
-    def __init__(self, enc, vehicle: VehiclePort, mav_type: int | None = None,
+    def __init__(self, enc, vehicle: Snapshot, mav_type: int | None = None,
                  autopilot: int = mav.MAV_AUTOPILOT_GENERIC) -> None:
         self.mav = enc
         self.vehicle = vehicle

@@ -66,7 +66,7 @@ class MissionService(Service):
         error = self.vehicle.set_plan(plan, t)
         if error:
             return UNSUPPORTED, error
-        n = self.vehicle.plan_leases() if items else 0
+        n = len(self.vehicle.status().book.plan) if items else 0
         self.out.statustext(f"return plan: {len(items)} items, {n} leases" if items else "return plan: default")
         return ACCEPTED, ""
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from link.linkmap_format import FILE_NAME, encode
-from vehicle.port import VehiclePort
+from vehicle.port import Snapshot
 from vehicle.services.actions import VehicleActions
 from vehicle.services.base import Parts, Service, mav
 from vehicle.services.commands import CommandServer
@@ -40,7 +40,7 @@ def vehicle_services(p: Parts, *, rates: Mapping[int, float] = DEFAULT_RATES, dr
             FtpServer(p.out, vehicle_files(p.vehicle))]
 
 
-def vehicle_files(vehicle: VehiclePort) -> Files:
+def vehicle_files(vehicle: Snapshot) -> Files:
     """What a vehicle offers as files over MAVLink FTP: its link map (docs/architecture.md §6), made when a station
     opens it."""
     return {FILE_NAME: lambda: encode(vehicle.linkmap_cells())}

@@ -36,12 +36,13 @@ class OperatorControl(Service):
                                 mav.MAV_SEVERITY_WARNING)
             return mav.MAV_RESULT_DENIED, 0
         v = self.vehicle
-        if p[0] >= 0.5:
-            chk = v.acquire(sender, src.compid, t, allow_takeover=p[1] >= 0.5)
-            if chk.executes:  # (the lease granted is the new epoch's current one)
-                return mav.MAV_RESULT_ACCEPTED, chk.lease.epoch if chk.lease is not None else 0
-            return answer(self.out, chk, "control request", sender)
-        return answer(self.out, v.release(sender, t), "release", sender)
+        request = p[0] >= 0.5
+        chk = v.operator_control(sender, src.compid, t, request, allow_takeover=p[1] >= 0.5)
+        if not request:
+            return answer(self.out, chk, "release", sender)
+        if chk.executes:  # (the lease granted is the new epoch's current one)
+            return mav.MAV_RESULT_ACCEPTED, chk.lease.epoch if chk.lease is not None else 0
+        return answer(self.out, chk, "control request", sender)
 
     @command(mav.MAV_CMD_LEASE_CLAIM)
     def _claim(self, p: tuple, src: Source, t: float) -> Reply:

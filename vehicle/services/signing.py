@@ -18,7 +18,7 @@ from enum import Enum
 
 from link.signing import MAX_TIMESTAMP, Key, SigningVerdict, Streams, advance, enable, sim_stamp, timestamp_of
 from vehicle.keystore import STAMP_SAVE_EVERY, KeyStore, boot_stamp
-from vehicle.port import VehiclePort
+from vehicle.port import EventQueue
 from vehicle.services.base import Outbox, Service, Source, Throttle, handles, mav
 
 REJECT_NOTICE_GAP = 2.0  # s between STATUSTEXTs about refused frames
@@ -62,7 +62,7 @@ class Signing(Service):
     ``keystore`` (which also keeps the key and the timestamp on disk) or ``key`` turns it on; ``stamp(t)`` is the
     signing clock in 10 µs units since 2015 (the wall clock on a real vehicle, simulated time in the simulator)."""
 
-    def __init__(self, out: Outbox, vehicle: VehiclePort, boot_t: float = 0.0,
+    def __init__(self, out: Outbox, vehicle: EventQueue, boot_t: float = 0.0,
                  stamp: Callable[[float], int] = sim_stamp, *, key: Key | None = None, keystore: KeyStore | None = None,
                  verdicts: Counter | None = None) -> None:
         self.out = out
