@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 from sim.firmware.locate import FirmwareNotFound, find_firmware
-from sim.firmware.run import FirmwareRun
+from sim.firmware_runs import FirmwareRun
 from sim.scenario import load
 
 TARGET_X = 30.0  # docs/architecture.md §10: a 10-minute tunnel run with the firmware at >= 30x real time, wall clock

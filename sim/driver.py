@@ -56,12 +56,14 @@ class SimDriver:
 
 def simulated_vehicle(scenario: Scenario, kind: str, seed: int, param_file: Path | None = None,
                       boot_epoch: int | None = None, contingency: Contingency | None = None,
+                      on_epoch: Callable[[int], str | None] | None = None,
                       **endpoint_options) -> tuple[SimDriver, Core, Endpoint]:
     """The scenario's robot with the real onboard software on it: boot parameters from ``param_file`` (or the
     defaults; StoredFileError if it is damaged), then the scenario's own, as `sim run` and `sim serve` both start
     it. ``boot_epoch`` None (`sim run`) derives the first epoch from ``seed``; `sim serve` draws one. The robot
     and its sensors draw from their own streams of ``seed`` (``link.radio.subsystem_rng``). ``contingency`` is a
-    baseline link-loss behaviour to fly instead of the return plan (``sim.policies``)."""
+    baseline link-loss behaviour to fly instead of the return plan (``sim.policies``); ``on_epoch`` is told of each
+    epoch the vehicle issues (`sim serve` keeps them: ``vehicle.epochs.EpochLog.issued``)."""
     driver = SimDriver(scenario, kind, subsystem_rng(seed, "robot"), subsystem_rng(seed, "sensors"))
     if param_file is not None:
         remove_leftovers(param_file)
@@ -72,5 +74,6 @@ def simulated_vehicle(scenario: Scenario, kind: str, seed: int, param_file: Path
         params.set("RTL_BODY_R", driver.robot.shape.radius)
     for k, v in scenario.params.items():
         params.set(k, v)
-    vehicle = boot_core(driver, params, scenario.start, 0.0, seed=seed, boot_epoch=boot_epoch, contingency=contingency)
+    vehicle = boot_core(driver, params, scenario.start, 0.0, seed=seed, boot_epoch=boot_epoch, contingency=contingency,
+                        on_epoch=on_epoch)
     return driver, vehicle, Endpoint(vehicle, param_file=param_file, **endpoint_options)

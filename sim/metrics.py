@@ -340,38 +340,3 @@ def verdict(run, m: dict, leases: bool = True) -> list[str]:
     flies no lease machinery, and the rules about it are not judged."""
     c = run.scenario.criteria
     return [failure for rule, needs_leases in RULES if leases or not needs_leases for failure in rule(c, m, run)]
-
-
-def _reaction(latency: float | None) -> str:
-    """The reaction as a reader should take it: from the moment the trigger's condition became true (LNK_TIMEOUT
-    of silence, or the owner's delivery falling below LNK_MIN_Q)."""
-    if latency is None:
-        return "reaction -"
-    return f"reaction {latency:.3f} s after the trigger's condition (LNK_TIMEOUT of silence or LNK_MIN_Q)"
-
-
-def summary(run, m: dict) -> str:
-    def f(x, unit="", nd=1):
-        return "-" if x is None else f"{x:.{nd}f}{unit}"
-
-    lines = [
-        f"returnlink sim run {m['scenario']} --vehicle {m['vehicle']} --seed {m['seed']} --policy {m['policy']}",
-        f"  simulated {f(m['sim_duration_s'], ' s')} at {f(m['real_time_factor'], 'x real time')}",
-        f"  link lost at {f(m['link_lost_s'], ' s')}, return began {f(m['return_started_s'], ' s')}"
-        f" ({_reaction(m['reaction_latency_s'])})",
-        f"  link regained at {f(m['link_regained_s'], ' s')}; drove {f(m['distance_back_m'], ' m')} back,"
-        f" max displacement {f(m['max_displacement_m'], ' m')}, target error {f(m['final_target_error_m'], ' m', 2)}",
-        f"  loss at {m['loss_position']}, at rest at {m['rest_position']}"
-        f" (delivery {f(m['rest_link_quality'], '', 2)}), link regained by {m['regained_by'] or '-'},"
-        f" {m['link_cycles']} link loss{'' if m['link_cycles'] == 1 else 'es'} (true frame)",
-        f"  collisions {m['collisions']} ({m['collisions_during_return']} during returns), stale commands executed"
-        f" {m['stale_commands_executed']},"
-        f" commands rejected {m['commands_rejected']}",
-        f"  estimator RMSE {f(m['estimator_rmse_m'], ' m', 2)}, trail {m['trail_points']} points"
-        f" (max deviation {f(m['trail_max_deviation_m'], ' m', 2)})",
-        "  lease events:",
-    ]
-    for e in m["lease_events"]:
-        lines.append(f"    {e['t']:7.2f} s  {e['expired']} -> {e['current']}  {e['reason']}")
-    lines.append("  PASSED" if m["passed"] else "  FAILED: " + "; ".join(m["failures"]))
-    return "\n".join(lines)

@@ -5,82 +5,36 @@ never the simulator's truth: it takes control, uploads the return plan, arms, dr
 reported position toward each waypoint, lets go of the stick when its telemetry goes stale, and when the vehicle is
 back and waiting for a claim it claims the fresh lease and drives the resume route.
 
-Like a person, it learns from a lost link: a place it was driving toward when the link died is tried again, but
-after ``attempts`` losses on the way there it gives that place up and goes on with the rest of its route. Without
-that, a script would drive back into the same dead zone for as long as the scenario lasts, and every loss the
-run counts would be the script's, not the vehicle's (``attempts = 1000`` keeps that stubborn operator).
+Like every scripted operator (``sim.station_script.ScriptedStation``, its root), it learns from a lost link: a
+place it was driving toward when the link died is tried again, but after ``attempts`` losses on the way there it
+gives that place up and goes on with the rest of its route.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 from gcs.station import GroundStation, LeaseStatus, Pending, Transfer, VehicleView, mav
 from link.mission import Item
+from sim.station_script import WAYPOINT_RADIUS, Leg, ScriptedStation
 
 STALE_TELEMETRY = 1.0  # s: an operator lets go of the stick when the picture freezes
-WAYPOINT_RADIUS = 1.5  # m
 # what ``step`` compares the vehicle's status with every tick, looked up in the dialect once
 _AWAITING_CLAIM, _TELEOP = mav.RETURNLINK_STATE_AWAITING_CLAIM, mav.RETURNLINK_STATE_TELEOP
 _RETURNING, _COMMS_LOST = mav.RETURNLINK_STATE_RETURNING, mav.LEASE_EXPIRE_REASON_COMMS_LOST
 _SETTING_UP = frozenset(("connect", "acquiring", "uploading", "arming"))  # the phases before it drives
 
 
-@dataclass
-class Leg:
-    points: tuple[tuple[float, float, float], ...]
-    index: int = 0
-
-    @property
-    def done(self) -> bool:
-        return self.index >= len(self.points)
-
-    def join(self, x: float, y: float) -> None:
-        """Pick the route up where a person would, from (x, y): at the start of the leg the robot is on (its
-        projection falls inside the leg, within WAYPOINT_RADIUS of it, nearer it than the next waypoint), never
-        behind the waypoint already reached; off every leg (in a room beside a doorway) it drives to the next
-        waypoint, as the route was written. An operator whose robot the return brought home past the first
-        waypoint of the way out drives on home, not back into the dead zone to touch that waypoint first."""
-        if self.done:
-            return
-        wx, wy = self.points[self.index][:2]
-        best, best_d = self.index, math.hypot(x - wx, y - wy)
-        for k in range(max(self.index, 1), len(self.points)):
-            (ax, ay), (bx, by) = self.points[k - 1][:2], self.points[k][:2]
-            dx, dy = bx - ax, by - ay
-            L2 = dx * dx + dy * dy
-            u = ((x - ax) * dx + (y - ay) * dy) / L2 if L2 > 0 else -1.0
-            if 0.0 < u < 1.0:
-                d = math.hypot(x - ax - u * dx, y - ay - u * dy)
-                if d < best_d and d < WAYPOINT_RADIUS:
-                    best, best_d = k, d
-        self.index = best
-
-
-class Operator:
+class Operator(ScriptedStation):
     def __init__(self, gs: GroundStation, route, resume_route, plan: list[Item], teleop: str = "velocity",
                  attempts: int = 2, rejoin: bool = True) -> None:
+        super().__init__(route, resume_route, attempts, rejoin)
         self.gs = gs
         self.plan = plan
         self.teleop = teleop
-        self.leg = Leg(tuple(route))
-        self.resume = Leg(tuple(resume_route))
-        self.phase = "connect"
         self.pending: Pending | None = None
         self.transfer: Transfer | None = None
         self.claims = 0
-        self.attempts = attempts
-        self.rejoin = rejoin  # False: a stubborn operator that drives every waypoint of its way home
-        self.heading_to: tuple[float, float] | None = None  # the waypoint being driven toward
-        # the one being driven toward at the latest sign of a loss (the picture froze, or the vehicle said it lost
-        # us); it counts once the vehicle is back and waits for a claim
-        self.cut_off: tuple[float, float] | None = None
-        self.losses: dict[tuple[float, float], int] = {}  # waypoint -> links lost on the way there
-        self.log: list[tuple[float, str]] = []
-
-    def _say(self, t: float, text: str) -> None:
-        self.log.append((t, text))
 
     def step(self, t: float) -> None:
         gs, v = self.gs, self.gs.vehicle
@@ -94,13 +48,13 @@ class Operator:
         if st.state == _AWAITING_CLAIM and st.owner == gs.sysid and fresh:
             self._claim(t, st)
         elif not fresh:
-            self.cut_off = self.heading_to or self.cut_off  # the latest sign of a loss names the place
+            self._lost_on_the_way()  # the latest sign of a loss names the place
             # the picture froze: the hand comes off the stick, and the joystick streams it at rest whatever the
             # station hears, as ground stations' joysticks do (docs/simulate.md, "The scripted station")
             gs.stop()
         elif st.state != _TELEOP or st.owner != gs.sysid:
             if st.state == _RETURNING and st.last_reason == _COMMS_LOST:
-                self.cut_off = self.heading_to or self.cut_off  # the vehicle lost us and is coming back
+                self._lost_on_the_way()  # the vehicle lost us and is coming back
             gs.stop()
         else:
             self._drive_on()
@@ -109,17 +63,14 @@ class Operator:
         """The vehicle is back and waits for our claim: count the loss against the place it was cut off on the way
         to, claim the fresh lease, and from here drive the way home, picked up where the return left the robot."""
         gs, v = self.gs, self.gs.vehicle
-        if self.cut_off is not None:  # the link died on the way there: the vehicle came back without it
-            self.losses[self.cut_off] = self.losses.get(self.cut_off, 0) + 1
-            self.cut_off = None
+        self._count_loss()  # the link died on the way there: the vehicle came back without it
         if self.pending is None or self.pending.done:
             self.pending = gs.claim(-1)
             self.claims += 1
             self._say(t, f"claiming [{st.epoch},{st.current}]")
             if self.phase == "driving" and not self.leg.done:
                 self.phase = "resuming"
-            if self.rejoin and self.phase == "resuming" and v.position is not None:
-                self.resume.join(*v.position)  # the return moved the robot: pick the way home up from there
+            self._pick_up_way_home(v.position)  # the return moved the robot: pick the way home up from there
 
     def _drive_on(self) -> None:
         """Our lease, a fresh picture: drive the leg of the phase (the route, or after a claim the way home)."""
@@ -167,7 +118,7 @@ class Operator:
             return
         x, y, speed = leg.points[leg.index]
         place = (x, y)
-        if self.losses.get(place, 0) >= self.attempts:  # lost the link on the way there often enough: give it up
+        if self._given_up(place):  # lost the link on the way there often enough: give it up
             leg.index += 1
             self.heading_to = None
             if leg.done:

@@ -132,7 +132,7 @@ def test_strangers_cycling_source_ports_do_not_starve_the_owners_downlink():
         owner.send(enc.command_long_encode(1, 1, mav.MAV_CMD_REQUEST_OPERATOR_CONTROL, 0, 1, 0, 10, 0, 0, 0, 0)
                    .pack(enc), vehicle)
         wait_until(lambda: served.vehicle.book.owner == 200, 20, "the owner's acquire")
-        wait_until(lambda: served.server.endpoint.pinned() == [owner.address], 20, "the owner's address pinned")
+        wait_until(lambda: served.server.plant.pinned() == [owner.address], 20, "the owner's address pinned")
         other = mav.MAVLink(None, 100, 190)
         stranger_hb = other.heartbeat_encode(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(other)
         for s in strangers:  # fill the table with strangers before counting

@@ -23,7 +23,7 @@ from sim.firmware.operator import (
     FirmwareOperator,
     drive_setpoint,
 )
-from sim.operator import WAYPOINT_RADIUS
+from sim.station_script import WAYPOINT_RADIUS
 from vehicle.navigation import TURN_IN_PLACE
 
 # gen:office seed 1: in along the corridor, a left turn through a door on the corridor's east side, into the room;
@@ -156,7 +156,7 @@ def test_the_firmware_drives_into_the_generated_offices_far_room_touching_no_wal
     door's middle and brushed the jamb, and drove into the partition on a stale velocity. Firmware instances from
     130 (no other test file starts there)."""
     from sim.firmware.process import INSTANCE_ENV
-    from sim.firmware.run import FirmwareRun
+    from sim.firmware_runs import FirmwareRun
     from sim.worlds.resolve import load
     from tests.firmware_helpers import firmware_or_skip
 

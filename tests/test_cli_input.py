@@ -115,9 +115,9 @@ def test_bad_parm_files_exit_2_by_file_and_line(tmp_path, capsys):
 def test_a_served_companions_bad_files_exit_2_before_the_firmware_boots(tmp_path, monkeypatch, capsys):
     # --params, --key and --state configure the companion under `sim serve --vehicle ardurover --policy companion`,
     # checked as the native vehicle's are, before any firmware process is started
-    from sim.firmware import serve as firmware_serve
+    from sim.serve import Server
 
-    monkeypatch.setattr(firmware_serve.FirmwareServer, "run", lambda self: pytest.fail("served a bad set-up"))
+    monkeypatch.setattr(Server, "serve", lambda self, *a, **k: pytest.fail("served a bad set-up"))
     fake = tmp_path / "ardurover"
     fake.write_text("#!/bin/sh\nexit 1\n")
     fake.chmod(0o755)

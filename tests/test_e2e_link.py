@@ -129,7 +129,7 @@ def test_weak_radio_settles_after_two_cycles(tmp_path, vehicle):
     assert m["regained_by"] == "return" and m["passed"], m.get("failures")
     # at the fringe the quality trigger may call the loss while lucky packets still come: the reaction is measured
     # from the moment delivery fell below LNK_MIN_Q, not from a silence that had not yet timed out, so never < 0
-    said = metrics.summary(r, m)
+    said = r.plant.summary(r, m)
     assert m["reaction_latency_s"] >= 0
     assert f"reaction {m['reaction_latency_s']:.3f} s after the trigger's condition" in said
     if vehicle == "rover":

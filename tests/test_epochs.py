@@ -57,10 +57,11 @@ def test_a_damaged_epochs_file_is_named_with_its_line(tmp_path, text, line):
 
 
 def _acked(server: Server, frame: bytes, t: float):
-    server.endpoint.receive(frame, t)
+    endpoint = server.plant.endpoint
+    endpoint.receive(frame, t)
     server.vehicle.tick(t)
-    for out in server.endpoint.tick(t):
-        m = server.endpoint.parser.parse_buffer(out)[0]
+    for out in endpoint.tick(t):
+        m = endpoint.parser.parse_buffer(out)[0]
         if m.get_type() == "COMMAND_ACK":
             return m
     raise AssertionError("no COMMAND_ACK")

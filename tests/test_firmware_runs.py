@@ -22,10 +22,11 @@ from sim.campaign import sweep
 from sim.campaign.executors import SerialExecutor
 from sim.campaign.spec import parse_spec
 from sim.cli import main
+from sim.compare import differing as differing_within
 from sim.firmware.bridge import MAGIC, SERVO_PACKET, FrameVerdict
-from sim.firmware.metrics import TOLERANCE, differing
+from sim.firmware.metrics import REPEATABILITY, TOLERANCE
 from sim.firmware.process import FirmwareError, wait_for
-from sim.firmware.run import FirmwareRun
+from sim.firmware_runs import FirmwareRun
 from sim.scenario import load
 from tests.firmware_helpers import firmware_or_skip, short_scenario
 
@@ -130,6 +131,11 @@ def test_same_seed_flies_the_same_drive_until_the_loss(runs, firmware):
     _same_drive(first, again)
     assert abs(_reaction(first.metrics) - _reaction(again.metrics)) <= 2 * TOLERANCE["s"]
     assert [e["mode"] for e in again.metrics["firmware_modes"]][:3] == ["MANUAL", "GUIDED", "SMART_RTL"]
+
+
+def differing(a: dict, b: dict) -> list[str]:
+    """The comparator as a replay of a firmware trial asks it."""
+    return differing_within(a, b, REPEATABILITY)
 
 
 def test_differing_sees_a_real_difference_and_forgives_jitter(runs):

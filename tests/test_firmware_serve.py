@@ -12,9 +12,8 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from gcs.station import GroundStation, mav
-from sim.firmware.companion_serve import CompanionServer
-from sim.firmware.serve import FirmwareServer
 from sim.scenario import load
+from sim.serve import Server
 from tests.firmware_helpers import firmware_or_skip
 from vehicle.companion.router import COMPANION_COMPID
 
@@ -26,9 +25,10 @@ def test_a_plain_ground_station_hears_and_commands_the_served_firmware():
     gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     gcs.bind(("127.0.0.1", 0))
     gcs.settimeout(0.2)
-    server = FirmwareServer(load("tunnel"), 1, "ardupilot-hold", firmware, port=0, peers=(gcs.getsockname(),),
-                            perfect_link=True, speedup=20.0, duration=40.0, out=io.StringIO())
-    thread = threading.Thread(target=server.run, daemon=True)
+    server = Server(load("tunnel"), "ardurover", 1, port=0, peers=(gcs.getsockname(),), perfect_link=True,
+                    policy="ardupilot-hold", firmware=firmware, speedup=20.0)
+    thread = threading.Thread(target=server.serve, kwargs={"speedup": 20.0, "duration": 40.0, "out": io.StringIO()},
+                              daemon=True)
     thread.start()
     mav = apm.MAVLink(None, srcSystem=255, srcComponent=190)
     seen: dict[str, object] = {}
@@ -51,10 +51,11 @@ def test_a_plain_ground_station_hears_and_commands_the_served_firmware():
     finally:
         thread.join(90)
         gcs.close()
+        server.close()
     assert seen["heartbeat"].autopilot == apm.MAV_AUTOPILOT_ARDUPILOTMEGA
     assert seen["ack"].result == apm.MAV_RESULT_ACCEPTED
-    assert not thread.is_alive() and not server.link.process.alive()
-    assert server.rows and server.link.tap.version.startswith("ArduRover")
+    assert not thread.is_alive() and not server.plant.link.process.alive()
+    assert server.plant.rows and server.plant.link.tap.version.startswith("ArduRover")
 
 
 def test_a_ground_station_takes_control_through_the_served_companion(tmp_path):
@@ -64,10 +65,11 @@ def test_a_ground_station_takes_control_through_the_served_companion(tmp_path):
     gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     gcs.bind(("127.0.0.1", 0))
     gcs.settimeout(0.05)
-    server = CompanionServer(load("tunnel"), 1, firmware, port=0, peers=(gcs.getsockname(),), perfect_link=True,
-                             speedup=20.0, duration=60.0, out=io.StringIO(),
-                             epochs_file=tmp_path / "returnlink.epochs")
-    thread = threading.Thread(target=server.run, daemon=True)
+    server = Server(load("tunnel"), "ardurover", 1, port=0, peers=(gcs.getsockname(),), perfect_link=True,
+                    epochs_file=tmp_path / "returnlink.epochs", policy="companion", firmware=firmware, speedup=20.0)
+    out = io.StringIO()
+    thread = threading.Thread(target=server.serve, kwargs={"speedup": 20.0, "duration": 60.0, "out": out},
+                              daemon=True)
     thread.start()
     gs = GroundStation(255, 190, target=1, target_comp=COMPANION_COMPID)
     parser = apm.MAVLink(None, srcSystem=255, srcComponent=190)
@@ -96,13 +98,14 @@ def test_a_ground_station_takes_control_through_the_served_companion(tmp_path):
     finally:
         thread.join(90)
         gcs.close()
+        server.close()
     assert heard[1].autopilot == apm.MAV_AUTOPILOT_ARDUPILOTMEGA  # the firmware's own heartbeat, relayed
     assert COMPANION_COMPID in heard  # and the companion's beside it
     assert pending is not None and pending.ok
     assert owned is not None and owned.state == mav.RETURNLINK_STATE_TELEOP
-    assert not thread.is_alive() and not server.link.process.alive()
-    assert server.companion.vehicle is not None and server.companion.vehicle.book.owner == 255
-    assert "lease teleop" in server.out.getvalue()  # the status line says who holds the lease
+    assert not thread.is_alive() and not server.plant.link.process.alive()
+    assert server.vehicle is not None and server.vehicle.book.owner == 255
+    assert "lease teleop" in out.getvalue()  # the status line says who holds the lease
 
 
 def test_a_plain_ground_station_meets_the_served_applet():
@@ -110,19 +113,19 @@ def test_a_plain_ground_station_meets_the_served_applet():
     text, said during the boot before any ground station is served), whose RLNK_ parameters an ordinary ground
     station reads through the radio proxy, and the vehicle-side radio's RADIO_STATUS is fed to the firmware once a
     second, as on a rover with a SiK radio."""
-    from sim.firmware.serve import AppletServer
     from vehicle.applet import TEXT_PREFIX
 
     firmware = firmware_or_skip()
     gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     gcs.bind(("127.0.0.1", 0))
     gcs.settimeout(0.2)
-    server = AppletServer(load("tunnel"), 1, "applet", firmware, port=0, peers=(gcs.getsockname(),),
-                          speedup=20.0, duration=40.0, out=io.StringIO())
+    server = Server(load("tunnel"), "ardurover", 1, port=0, peers=(gcs.getsockname(),), policy="applet",
+                    firmware=firmware, speedup=20.0)
     sent: list[float] = []
     feed = server.plant.radio_status
     server.plant.radio_status = lambda state, t: (sent.append(t), feed(state, t))
-    thread = threading.Thread(target=server.run, daemon=True)
+    thread = threading.Thread(target=server.serve, kwargs={"speedup": 20.0, "duration": 40.0, "out": io.StringIO()},
+                              daemon=True)
     thread.start()
     mav = apm.MAVLink(None, srcSystem=255, srcComponent=190)
     timeout = None
@@ -145,8 +148,9 @@ def test_a_plain_ground_station_meets_the_served_applet():
     finally:
         thread.join(120)
         gcs.close()
+        server.close()
     texts = [text for _t, text in server.plant.applet_texts]
     assert any(text.startswith(TEXT_PREFIX + "ready") for text in texts), texts
     assert timeout == pytest.approx(server.plant.rlnk["RLNK_TIMEOUT"])
     assert len(sent) >= 10 and all(b - a == pytest.approx(1.0, abs=0.05) for a, b in zip(sent, sent[1:], strict=False))
-    assert not thread.is_alive() and not server.link.process.alive()
+    assert not thread.is_alive() and not server.plant.link.process.alive()

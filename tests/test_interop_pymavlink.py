@@ -60,7 +60,7 @@ def test_second_station_is_refused_and_old_lease_commands_after_takeover(served)
 
         # alpha's stream under its old lease: refused, counted, never executed
         rejected = served.vehicle.commands_rejected
-        start = served.server.driver.pose
+        start = served.server.robot.pose
         for _ in range(20):
             alpha.mav.set_position_target_local_ned_send(0, 1, 1, rl.MAV_FRAME_LOCAL_NED, 0b110111000111,
                                                          0, 0, 0, 1.5, 0, 0, 0, 0, 0, 0, 0)
@@ -68,7 +68,7 @@ def test_second_station_is_refused_and_old_lease_commands_after_takeover(served)
         alpha.mav.command_long_send(1, 1, rl.MAV_CMD_LEASE_EXPIRE, 0, old_epoch, 0, 0, 0, 0, 0, 0)
         assert _ack(alpha, rl.MAV_CMD_LEASE_EXPIRE).result == 10
         wait_until(lambda: served.vehicle.commands_rejected >= rejected + 21, 20, "21 counted refusals")
-        moved = served.server.driver.pose  # the true pose: the robot did not move an inch
+        moved = served.server.robot.pose  # the true pose: the robot did not move an inch
         assert abs(moved[0] - start[0]) < 0.02 and served.vehicle.setpoint is None
         assert served.vehicle.control.stale_commands_executed == 0
     finally:
@@ -87,7 +87,7 @@ def test_a_retried_command_is_answered_once_per_message_and_executed_once(served
             gcs.mav.command_long_send(1, 1, rl.MAV_CMD_NAV_RETURN_TO_LAUNCH, confirmation, 0, 0, 0, 0, 0, 0, 0)
             assert _ack(gcs, rl.MAV_CMD_NAV_RETURN_TO_LAUNCH).result == rl.MAV_RESULT_ACCEPTED
         assert [e.reason.name for e in served.vehicle.event_log[events:]].count("OPERATOR_EXPIRE") == 1
-        assert served.server.endpoint.counters.command_retries == 2
+        assert served.server.plant.endpoint.counters.command_retries == 2
         gcs.mav.command_long_send(1, 1, 31999, 0, 0, 0, 0, 0, 0, 0, 0)
         assert _ack(gcs, 31999).result == rl.MAV_RESULT_UNSUPPORTED
     finally:

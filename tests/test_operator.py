@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from sim.operator import Leg
+from sim.station_script import Leg
 
 HOME = ((40.0, 0.0, 1.2), (-5.0, 0.0, 1.5))  # the tunnel's resume route: out of the bend, then home
 

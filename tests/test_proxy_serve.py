@@ -186,11 +186,11 @@ def test_sim_serve_answers_a_command_arriving_between_ticks_at_once():
         now[0] += timeout
         return False
 
-    def after_tick_clock(t: float, after=server._after_tick) -> None:
+    def tick_clock(t: float, tick=server.plant.tick) -> None:
         tick_clocks.append(now[0])
-        after(t)
+        tick(t)
 
-    server._after_tick = after_tick_clock
+    server.plant.tick = tick_clock
     try:
         server.serve(duration=0.6, clock=lambda: now[0], sleep=lambda s: None, out=None, wait=wait)
     finally:

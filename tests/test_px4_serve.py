@@ -129,8 +129,8 @@ def test_a_ground_station_takes_control_through_the_companion_beside_served_px4(
 
     from gcs.station import GroundStation
     from gcs.station import mav as gmav
-    from sim.px4.serve import PX4CompanionServer
     from sim.scenario import load
+    from sim.serve import Server
     from vehicle.companion.router import COMPANION_COMPID
 
     px4 = px4_or_skip()
@@ -138,10 +138,11 @@ def test_a_ground_station_takes_control_through_the_companion_beside_served_px4(
     gcs.bind(("127.0.0.1", 0))
     gcs.settimeout(0.05)
     speedup = 5.0
-    server = PX4CompanionServer(load("tunnel"), 1, px4, port=0, peers=(gcs.getsockname(),), perfect_link=True,
-                                speedup=speedup, duration=40.0, out=io.StringIO(),
-                                epochs_file=tmp_path / "returnlink.epochs")
-    thread = threading.Thread(target=server.run, daemon=True)
+    server = Server(load("tunnel"), "px4rover", 1, port=0, peers=(gcs.getsockname(),), perfect_link=True,
+                    epochs_file=tmp_path / "returnlink.epochs", policy="companion", px4=px4)
+    out = io.StringIO()
+    thread = threading.Thread(target=server.serve, kwargs={"speedup": speedup, "duration": 40.0, "out": out},
+                              daemon=True)
     thread.start()
     gs = None  # addressed once the companion is heard: PX4's system id is its instance's (MAV_SYS_ID)
     parser = apm.MAVLink(None, srcSystem=255, srcComponent=190)
@@ -171,9 +172,10 @@ def test_a_ground_station_takes_control_through_the_companion_beside_served_px4(
     finally:
         thread.join(90)
         gcs.close()
+        server.close()
     assert any(m.autopilot == apm.MAV_AUTOPILOT_PX4 for m in heard.values())  # PX4's own heartbeat, relayed
     assert COMPANION_COMPID in heard  # and the companion's beside it
     assert pending is not None and pending.ok
     assert owned is not None and owned.state == gmav.RETURNLINK_STATE_TELEOP
-    assert not thread.is_alive() and not server.link.process.alive()
-    assert "lease teleop" in server.out.getvalue()
+    assert not thread.is_alive() and not server.plant.link.process.alive()
+    assert "lease teleop" in out.getvalue()

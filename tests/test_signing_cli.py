@@ -69,8 +69,8 @@ def test_gcs_with_the_key_flies_and_without_it_only_watches(keyed_vehicle, capsy
     assert main([*url, "--key", str(path), "acquire"]) == 0
     assert main([*url, "--key", str(path), "param", "set", "LNK_TIMEOUT", "5"]) == 0
     assert served.vehicle.book.owner == 255 and served.vehicle.params["LNK_TIMEOUT"] == 5.0
-    assert served.server.endpoint.counters.signing[SigningVerdict.UNSIGNED] > 0
-    assert served.server.endpoint.counters.signing[SigningVerdict.ACCEPT] > 0
+    assert served.server.plant.endpoint.counters.signing[SigningVerdict.UNSIGNED] > 0
+    assert served.server.plant.endpoint.counters.signing[SigningVerdict.ACCEPT] > 0
     capsys.readouterr()
     served.server.close()  # shutdown saves the signing timestamp beside the key
     assert int(stamp_path(path).read_text()) > 0

@@ -53,7 +53,7 @@ def test_mavproxy_with_the_signing_module_flies_a_keyed_vehicle(keyed, tmp_path)
         wait_until(lambda: "DO_SET_MODE: ACCEPTED" in log.read_text(), 20, "DO_SET_MODE accepted")
         # the operator lease expired: the return plan ran (at the start of the adit there is no trail to follow)
         assert any(e.reason.name == "OPERATOR_EXPIRE" for e in served.vehicle.event_log)
-        assert served.server.endpoint.counters.signing[SigningVerdict.ACCEPT] > 0
+        assert served.server.plant.endpoint.counters.signing[SigningVerdict.ACCEPT] > 0
     finally:
         mp.close()
 
@@ -78,6 +78,6 @@ def test_mavsdk_can_watch_a_keyed_vehicle_but_not_act(keyed):
         time.sleep(0.3)
         assert served.vehicle.params["LNK_TIMEOUT"] == 3.0
         assert served.vehicle.book.owner is None and served.vehicle.state() == State.NO_OWNER
-        assert served.server.endpoint.counters.signing[SigningVerdict.UNSIGNED] > 0
+        assert served.server.plant.endpoint.counters.signing[SigningVerdict.UNSIGNED] > 0
     finally:
         sdk.destroy()

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import time
 from dataclasses import dataclass, field, replace
 
@@ -139,18 +138,3 @@ def trial_from_row(row: dict) -> Trial:
     params = json.loads(row["params"]) if row.get("params") else {}
     return Trial(row["scenario"], row["source"], row["scenario_text"], row["vehicle"], int(row["seed"]),
                  tuple(sorted((k, float(v)) for k, v in params.items())), row["policy"])
-
-
-def same_metrics(a: dict, b: dict) -> list[str]:
-    """Names of the metrics that differ between two metric dicts (``real_time_factor`` is wall-clock and left
-    out); an empty list means the trial was reproduced exactly."""
-    out = []
-    for k in sorted(set(a) | set(b)):
-        if k == "real_time_factor":
-            continue
-        x, y = a.get(k), b.get(k)
-        if isinstance(x, float) and isinstance(y, float) and math.isnan(x) and math.isnan(y):
-            continue
-        if x != y:
-            out.append(k)
-    return out

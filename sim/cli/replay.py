@@ -42,7 +42,7 @@ def command(args: argparse.Namespace) -> int:
     if row["status"] == "error":
         print(f"returnlink: the stored row is an error ({row.get('error')}); nothing to compare", file=sys.stderr)
         return 0 if m["passed"] else 1
-    return _compared(row, m, trial.vehicle)
+    return _compared(row, m, run.plant.repeatability)
 
 
 def _stored_row(directory: Path, wanted: str) -> dict:
@@ -76,20 +76,20 @@ def _with_autopilot(trial, args: argparse.Namespace):
     return replace(trial, firmware=str(locate[trial.vehicle]()))
 
 
-def _compared(row: dict, m: dict, vehicle: str) -> int:
-    """The exit code of a replay whose run completed: its metrics against the stored row's. A returnlink vehicle
-    must repeat them exactly; a real autopilot only within its repeatability, and beyond it is told, not failed."""
+def _compared(row: dict, m: dict, within) -> int:
+    """The exit code of a replay whose run completed: its metrics against the stored row's, as far as its plant
+    repeats a run (``within``, ``sim.compare.Repeatability``). A returnlink vehicle must repeat them exactly; a real
+    autopilot only within its repeatability, and beyond it is told, not failed."""
     import json
 
     from sim.campaign.store import JSON_METRICS
-    from sim.policies import AUTOPILOT_VEHICLES
+    from sim.compare import differing
 
     stored = {k: (json.loads(v) if isinstance(v, str) and k in JSON_METRICS else v)
               for k, v in row.items() if k in m}
     fresh = json.loads(json.dumps({k: m[k] for k in stored}))
-    autopilot = vehicle in AUTOPILOT_VEHICLES
-    differ, same = _differing(stored, fresh, autopilot)
-    if differ and autopilot:
+    differ = [k for k in differing(stored, fresh, within) if k not in _INPUTS]
+    if differ and not within.exact:
         print(f"returnlink: the firmware did not repeat the stored trial exactly: {', '.join(differ)} differ beyond "
               "its repeatability (see sim/firmware/metrics.py: ArduPilot SITL's own threads make a firmware run "
               "repeatable only within a tick or so, and the radio can turn that tick into another outcome)",
@@ -98,18 +98,6 @@ def _compared(row: dict, m: dict, vehicle: str) -> int:
     if differ:
         print(f"returnlink: error: replay differs from the stored trial in {', '.join(differ)}", file=sys.stderr)
         return 1
-    print(f"  {same}")
+    print("  metrics identical to the stored trial (real_time_factor aside)" if within.exact else
+          "  metrics match the stored trial within the firmware's repeatability (sim.firmware.metrics.TOLERANCE)")
     return 0 if m["passed"] else 1
-
-
-def _differing(stored: dict, fresh: dict, autopilot: bool) -> tuple[list[str], str]:
-    """The outcome metrics that differ (the inputs aside), and what to say when none does."""
-    if autopilot:
-        from sim.firmware.metrics import differing
-
-        return ([k for k in differing(stored, fresh) if k not in _INPUTS],
-                "metrics match the stored trial within the firmware's repeatability (sim.firmware.metrics.TOLERANCE)")
-    from sim.campaign.trial import same_metrics
-
-    return ([k for k in same_metrics(stored, fresh) if k not in _INPUTS],
-            "metrics identical to the stored trial (real_time_factor aside)")

@@ -108,8 +108,10 @@ def _server(args: argparse.Namespace, sc, peers, params, keystore, epochs):
 
 def _plot(server, args: argparse.Namespace, sc) -> None:
     """The served run's trajectory, written on exit (--out, else out/serve-SCENARIO-VEHICLE)."""
+    from sim.report import trajectory
+
     out = Path(args.out) if args.out else Path("out") / f"serve-{sc.name}-{server.kind}"
     try:
-        print(f"returnlink: wrote {server.plot(out / 'trajectory.png')}", file=sys.stderr)
+        print(f"returnlink: wrote {trajectory(server, out / 'trajectory.png')}", file=sys.stderr)
     except OSError as e:
         raise fail(f"cannot write the plot to {out}: {e}") from None

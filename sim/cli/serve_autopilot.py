@@ -1,12 +1,12 @@
 """``returnlink sim serve --vehicle ardurover|px4rover``: the real autopilot behind the radio proxy, flying its own
 failsafe, with returnlink's Lua applet aboard (ArduPilot), or with --policy companion returnlink companion between
-the two (the ArduPilot firmware paces itself; PX4 is paced to the wall clock by its server)."""
+the two: the plant ``sim run`` flies, served by the one real-time loop (``sim.serve.Server``)."""
 
 from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from sim.cli.common import (
@@ -27,44 +27,43 @@ from sim.cli.common import (
 
 @dataclass(frozen=True)
 class Autopilot:
-    """What serving one real autopilot takes: its binary, log, failure, servers, and how it is named."""
+    """What serving one real autopilot takes: its binary, log, failure, the plant options that give it, and how it
+    is named."""
 
     who: str  # as the messages name it
     binary: Path
     log: str  # the file in the output directory its output goes to
     failure: type[Exception]  # what its process raises when it fails
     unusable: tuple[type[Exception], ...]  # a failure that says the binary given is no usable one (exit 2)
-    server: type  # the server for the policy flown without the companion
-    companion_server: type
     link: str  # where the companion sits
+    boots: str  # what it needs before it is ready
+    options: dict = field(default_factory=dict)  # the plant's options: the binary, and the pace for one that keeps it
 
 
-def _ardupilot(args: argparse.Namespace, policy: str) -> Autopilot:
-    from sim.firmware.companion_serve import CompanionServer
+def _ardupilot(args: argparse.Namespace) -> Autopilot:
     from sim.firmware.process import FirmwareError
-    from sim.firmware.serve import AppletServer, FirmwareServer
-    from sim.policies import APPLET_POLICY
 
-    server = AppletServer if policy == APPLET_POLICY else FirmwareServer
-    return Autopilot("the ArduPilot firmware", firmware_binary(args.firmware), "firmware.log", FirmwareError, (),
-                     server, CompanionServer, "the firmware's telemetry port")
+    binary = firmware_binary(args.firmware)
+    return Autopilot("the ArduPilot firmware", binary, "firmware.log", FirmwareError, (),
+                     "the firmware's telemetry port", "its EKF needs a GPS fix first",
+                     {"firmware": binary, "speedup": args.speedup})
 
 
-def _px4(args: argparse.Namespace, policy: str) -> Autopilot:
+def _px4(args: argparse.Namespace) -> Autopilot:
     from sim.px4.lockstep import PX4Unusable
     from sim.px4.process import PX4Error
-    from sim.px4.serve import PX4CompanionServer, PX4Server
 
-    return Autopilot("PX4", px4_dir(args.px4), "px4.log", PX4Error, (PX4Unusable,), PX4Server, PX4CompanionServer,
-                     "its telemetry link")
+    binary = px4_dir(args.px4)
+    return Autopilot("PX4", binary, "px4.log", PX4Error, (PX4Unusable,), "its telemetry link",
+                     "EKF2 needs its sensors and a GPS fix first", {"px4": binary})
 
 
 def command(args: argparse.Namespace, sc, kind: str) -> int:
     """Serve the autopilot of vehicle ``kind`` until it stops, the run's duration ends or the user interrupts;
     then its trajectory. 1: the autopilot failed; 2: the one given is no usable PX4."""
     from sim.firmware.process import stop_on_terminate
-    from sim.firmware.report import trajectory
     from sim.policies import COMPANION_POLICY, PX4_VEHICLE
+    from sim.report import trajectory
 
     policy = policy_for(args, kind)
     companion = policy == COMPANION_POLICY
@@ -73,15 +72,15 @@ def command(args: argparse.Namespace, sc, kind: str) -> int:
     who = "PX4" if kind == PX4_VEHICLE else "the ArduPilot firmware"
     if not companion:
         _refuse_companion_options(args, who)
-    pilot = (_px4 if kind == PX4_VEHICLE else _ardupilot)(args, policy)
+    pilot = (_px4 if kind == PX4_VEHICLE else _ardupilot)(args)
     out = Path(args.out) if args.out else Path("out") / f"serve-{sc.name}-{kind}"
     writable_dir(out)
     peers = tuple(args.peer) if args.peer else DEFAULT_PEERS
-    server, keystore = _server(args, sc, policy, companion, pilot, peers, out)
+    server, keystore = _server(args, sc, kind, policy, companion, pilot, peers, out)
     _announce(args, sc, policy, companion, pilot, peers, server, keystore)
     try:
         with stop_on_terminate():
-            server.run()
+            server.serve(args.speedup, args.duration)
     except pilot.failure as e:
         if isinstance(e, pilot.unusable):
             raise px4_unusable(pilot.binary, e) from None
@@ -89,7 +88,9 @@ def command(args: argparse.Namespace, sc, kind: str) -> int:
         return 1
     except KeyboardInterrupt:
         print(f"returnlink: stopped; {pilot.who} was stopped", file=sys.stderr)
-    if server.rows:
+    finally:
+        server.close()
+    if server.ticks:
         print(f"returnlink: wrote {trajectory(server, out / 'trajectory.png')}", file=sys.stderr)
     return 0
 
@@ -102,21 +103,24 @@ def _refuse_companion_options(args: argparse.Namespace, who: str) -> None:
                        f"companion); {who} keeps its parameters and signing in itself (set them over MAVLink)")
 
 
-def _server(args: argparse.Namespace, sc, policy: str, companion: bool, pilot: Autopilot, peers, out: Path):
+def _server(args: argparse.Namespace, sc, kind: str, policy: str, companion: bool, pilot: Autopilot, peers,
+            out: Path):
     """The server and the companion's keystore (None without one), bound; a damaged kept file: exit 2; a port in
     use: a Refusal (exit 2)."""
     from link.storage import StoredFileError
+    from sim.serve import Server
 
     try:
-        if not companion:
-            return pilot.server(sc, args.seed, policy, pilot.binary, args.port, peers, args.perfect_link,
-                                args.speedup, args.duration, log_path=out / pilot.log), None
-        params = parm_file(args.params)
-        keystore, epochs = serve_state(args)
-        server = pilot.companion_server(sc, args.seed, pilot.binary, args.port, peers, args.perfect_link,
-                                        args.speedup, args.duration, log_path=out / pilot.log, param_file=params,
-                                        keystore=keystore, epochs_file=epochs)
-        warn_heartbeat_speedup(args.speedup, server.companion.params["LNK_TIMEOUT"], "companion")
+        kept = {}
+        keystore = None
+        if companion:
+            params = parm_file(args.params)
+            keystore, epochs = serve_state(args)
+            kept = {"param_file": params, "keystore": keystore, "epochs_file": epochs}
+        server = Server(sc, kind, args.seed, args.port, peers, args.perfect_link, policy=policy,
+                        log_path=out / pilot.log, **kept, **pilot.options)
+        if companion:
+            warn_heartbeat_speedup(args.speedup, server.plant.companion.params["LNK_TIMEOUT"], "companion")
         return server, keystore
     except StoredFileError as e:  # a damaged kept file: refuse to start rather than boot on defaults
         raise fail(str(e)) from None
@@ -137,3 +141,4 @@ def _announce(args: argparse.Namespace, sc, policy: str, companion: bool, pilot:
           + serving_line(peers, args.perfect_link)
           + ("" if keystore is None else f"; the companion signs with key {keystore.key.fingerprint} from "
              f"{keystore.path}"), file=sys.stderr, flush=True)
+    print(f"returnlink: {pilot.who} is booting ({pilot.boots})...", file=sys.stderr, flush=True)

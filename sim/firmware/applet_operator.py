@@ -34,7 +34,7 @@ class AppletOperator(FirmwareOperator):
     def _position_heard(self, t: float) -> None:
         if self.last_position_t is not None and t - self.last_position_t >= self.applet_timeout:
             self.applet_busy = True  # silent long enough for the applet to have taken over
-            self.log.append((t, "picture back after the applet's timeout: hands off"))
+            self._say(t, "picture back after the applet's timeout: hands off")
 
     def _text_heard(self, text: str, t: float) -> None:
         if not text.startswith(TEXT_PREFIX):
@@ -44,7 +44,7 @@ class AppletOperator(FirmwareOperator):
             self.applet_busy = True
         elif words.startswith(DONE_WORDS):
             self.applet_busy = False
-        self.log.append((t, f"heard {text}"))
+        self._say(t, f"heard {text}")
 
     def _step(self, t: float) -> None:
         if self.applet_busy and self.phase in ("driving", "resuming") and self.fresh(t):
@@ -56,7 +56,7 @@ class AppletOperator(FirmwareOperator):
                 if self.still_since is not None and t - self.still_since >= REST_S:
                     self.applet_busy = False  # standing in GUIDED: nobody is returning it
                 else:
-                    self.cut_off = self.heading_to or self.cut_off
+                    self._lost_on_the_way()
                     self.sent_target = None
                     return
         self.still_since = None

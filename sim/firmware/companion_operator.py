@@ -40,7 +40,7 @@ class ThroughCompanion:
         """A scripted RTL (the scenario's ``rtl`` event): to the companion, where it expires the operator's lease
         and the return plan takes over, as on the native vehicle."""
         self.gs.rtl()
-        self.log.append((t, "rtl requested"))
+        self._say(t, "rtl requested")
 
     def take_control(self, t: float, start: str, then: str, ready: bool) -> None:
         """Take control of the companion and upload the return plan, one step a tick: ``phase`` goes ``start`` ->
@@ -54,14 +54,14 @@ class ThroughCompanion:
         elif self.phase == "acquiring":
             if self.pending is not None and self.pending.done:
                 if self.pending.ok:
-                    self.log.append((t, f"in control, epoch {self.pending.param2}"))
+                    self._say(t, f"in control, epoch {self.pending.param2}")
                     self.transfer = gs.upload(self.plan) if self.plan else None
                     self.phase = "uploading"
                 else:
                     self.phase = start
         elif self.transfer is None or self.transfer.done:
             if self.transfer is not None:
-                self.log.append((t, f"plan upload {'accepted' if self.transfer.ok else 'failed'}"))
+                self._say(t, f"plan upload {'accepted' if self.transfer.ok else 'failed'}")
             self.phase = then
 
     def claim(self, t: float, st) -> None:
@@ -74,7 +74,7 @@ class ThroughCompanion:
         if self.pending is None or self.pending.done:
             self.pending = self.gs.claim(-1)
             self.claims += 1
-            self.log.append((t, f"claiming [{st.epoch},{st.current}]"))
+            self._say(t, f"claiming [{st.epoch},{st.current}]")
             if self.phase == "driving" and not self.leg.done:
                 self.phase = "resuming"
             self._rejoin()
@@ -134,7 +134,7 @@ class CompanionOperator(ThroughCompanion, FirmwareOperator):
         # (``gcs.station.GroundStation.stop``): a zero-velocity target to the autopilot at 10 Hz, which the
         # companion refuses under the return's lease but hears, so a regain is judged on the same stream for every
         # robot (a heartbeat alone is three seconds of packets for the three a regain needs)
-        self.cut_off = self.heading_to or self.cut_off
+        self._lost_on_the_way()
         self.sent_target = None
         if t >= self.next_stick:
             self.next_stick = t + STICK_PERIOD

@@ -29,6 +29,7 @@ from __future__ import annotations
 import bisect
 import math
 
+from sim.compare import Repeatability
 from sim.firmware.lockstep import MODE_NAMES
 from sim.firmware.operator import GUIDED, RETURN_MODES, RTL, SMART_RTL
 from sim.metrics import FRAMES, KEYS, REGAIN_MOVED_M, point, rounded
@@ -193,31 +194,6 @@ def _estimator_rmse(rows: list) -> float | None:
     return math.sqrt(sum((a - c) ** 2 + (b - d) ** 2 for a, b, c, d in est) / len(est)) if est else None
 
 
-def summary(run, m: dict) -> str:
-    def f(x, unit="", nd=1):
-        return "-" if x is None else f"{x:.{nd}f}{unit}"
-
-    lines = [
-        f"returnlink sim run {m['scenario']} --vehicle {m['vehicle']} --seed {m['seed']} --policy {m['policy']}",
-        f"  firmware {m['firmware']} (booted in {run.plant.link.boot_s:.1f} simulated s before scenario time 0)",
-        f"  simulated {f(m['sim_duration_s'], ' s')} at {f(m['real_time_factor'], 'x real time')}",
-        f"  link lost at {f(m['link_lost_s'], ' s')}, firmware return began {f(m['return_started_s'], ' s')}"
-        f" (reaction {f(m['reaction_latency_s'], ' s', 3)} after LNK_TIMEOUT)",
-        f"  link regained at {f(m['link_regained_s'], ' s')}; drove {f(m['distance_back_m'], ' m')} back,"
-        f" max displacement {f(m['max_displacement_m'], ' m')}, home error {f(m['final_target_error_m'], ' m', 2)}",
-        f"  loss at {m['loss_position']}, at rest at {m['rest_position']}"
-        f" (delivery {f(m['rest_link_quality'], '', 2)}), link regained by {m['regained_by'] or '-'},"
-        f" {m['link_cycles']} failsafe return{'' if m['link_cycles'] == 1 else 's'} (true frame)",
-        f"  collisions {m['collisions']} ({m['collisions_during_return']} during returns), commands rejected"
-        f" {m['commands_rejected']}, EKF RMSE {f(m['estimator_rmse_m'], ' m', 2)}",
-        "  firmware modes:",
-    ]
-    lines += [f"    {e['t']:7.2f} s  {e['mode']}" for e in m["firmware_modes"]]
-    lines += [f"  note: {n}" for n in run.notes]
-    lines.append("  PASSED" if m["passed"] else "  FAILED: " + "; ".join(m["failures"]))
-    return "\n".join(lines)
-
-
 # How far two runs of the same trial may differ and still count as the same. A firmware run is repeatable only
 # within the firmware's own determinism: ArduPilot SITL runs some work on threads of its own (its IO thread, where
 # SmartRTL also simplifies its path), so under a busy CPU a frame can leave it one 20 ms tick later than in another
@@ -225,7 +201,7 @@ def summary(run, m: dict) -> str:
 # last DO_CHANGE_SPEED got through before the link died, and the outcome after the loss can then differ by much
 # more than the tick (measured, tunnel, 100 s, three runs in one process: SmartRTL came home at 1.59 m/s twice and
 # at 1.04 m/s once, 7 m short of home when the run ended). What stays within this tolerance run to run is the
-# drive until the loss; ``differing`` names the metrics beyond it rather than calling two runs equal.
+# drive until the loss; ``sim.compare.differing`` names the metrics beyond it rather than calling two runs equal.
 TOLERANCE = {"s": 0.2, "m": 1.0, "count": 2, "mps": 0.1, "quality": 0.15,
              # a mode change the operator asked for and the firmware had not yet shown is asked again a second later
              # (sim/firmware/operator.py RETRY_S): a frame a tick late moves it by that second
@@ -235,7 +211,10 @@ TOLERANCE = {"s": 0.2, "m": 1.0, "count": 2, "mps": 0.1, "quality": 0.15,
              "refusals": 5}
 
 
-def _tolerance(key: str) -> float:
+def _tolerance(key: str, metric: str) -> float:
+    """How far figure ``key`` (of metric ``metric``) may move between two runs of one firmware trial."""
+    if metric == "firmware_modes" and key == "t":
+        return TOLERANCE["mode_s"]
     if key.endswith("_s") or key == "t":
         return TOLERANCE["s"]
     if key.endswith("_mps"):
@@ -253,35 +232,7 @@ def _tolerance(key: str) -> float:
     return 0.0
 
 
-def _close(key: str, a, b) -> bool:
-    """Whether two values of metric ``key`` are the same within the firmware's repeatability: numbers within the
-    key's tolerance, tables and lists element by element, the mode timeline mode by mode, anything else exactly."""
-    if key == "firmware_modes" and isinstance(a, list) and isinstance(b, list):
-        return _same_modes(a, b)
-    if _exact(a) or _exact(b):
-        return a == b
-    if isinstance(a, (int, float)) and isinstance(b, (int, float)):
-        return abs(a - b) <= _tolerance(key) + 1e-9
-    if isinstance(a, dict) and isinstance(b, dict):
-        return a.keys() == b.keys() and all(_close(k, a[k], b[k]) for k in a)
-    if isinstance(a, list) and isinstance(b, list):
-        return len(a) == len(b) and all(_close(key, x, y) for x, y in zip(a, b, strict=True))
-    return a == b
-
-
-def _exact(x) -> bool:
-    """A value compared exactly: a flag, a name or a missing figure."""
-    return isinstance(x, (bool, str)) or x is None
-
-
-def _same_modes(a: list, b: list) -> bool:
-    """The same modes in the same order, each switch within ``TOLERANCE["mode_s"]``."""
-    return ([x.get("mode") for x in a] == [x.get("mode") for x in b]
-            and all(abs(x["t"] - y["t"]) <= TOLERANCE["mode_s"] + 1e-9 for x, y in zip(a, b, strict=True)))
-
-
-def differing(a: dict, b: dict) -> list[str]:
-    """The metrics of two runs of one firmware trial that differ by more than the firmware's own repeatability
-    (``TOLERANCE``); ``real_time_factor`` and the verdict's wording (which quotes counts) are left out."""
-    skip = {"real_time_factor", "failures", "passed"}
-    return [k for k in sorted(set(a) | set(b)) if k not in skip and not _close(k, a.get(k), b.get(k))]
+# What a run of a real autopilot repeats (``sim.compare.differing``): each figure within ``TOLERANCE``, the mode
+# timeline mode by mode with each switch within ``TOLERANCE["mode_s"]``; the real-time factor and the verdict's
+# wording (which quotes counts) are left out
+REPEATABILITY = Repeatability(_tolerance, frozenset({"real_time_factor", "failures", "passed"}), exact=False)

@@ -32,11 +32,10 @@ import math
 
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
-from sim.operator import Leg
+from sim.station_script import WAYPOINT_RADIUS, Leg, ScriptedStation
 from vehicle.navigation import TURN_IN_PLACE
 
 GCS_SYSID, GCS_COMPID = 255, 190
-WAYPOINT_RADIUS = 1.5  # m
 STALE_TELEMETRY = 1.5  # s: no position report for this long and the picture has frozen
 RETRY_S = 1.0
 REST_S = 2.0  # s at rest in a return mode before the operator takes over again
@@ -79,7 +78,7 @@ def drive_setpoint(position: tuple[float, float], yaw: float | None, waypoint: t
     return bearing, s * math.cos(err)
 
 
-class FirmwareOperator:
+class FirmwareOperator(ScriptedStation):
     # whether a frozen picture streams a standstill (``_hold_still``) rather than nothing: not where what reaches the
     # vehicle is judged as the native operator's stream (the companion's link watch: the native operator stops
     # streaming then, and the companion's own dead-man stops the rover), nor where another program drives in GUIDED
@@ -89,15 +88,11 @@ class FirmwareOperator:
     def __init__(self, route, resume_route, origin: tuple[float, float], attempts: int = 2,
                  sysid: int = GCS_SYSID, compid: int = GCS_COMPID, target_system: int = 1,
                  rejoin: bool = True) -> None:
+        super().__init__(route, resume_route, attempts, rejoin)
         self.mav = apm.MAVLink(None, srcSystem=sysid, srcComponent=compid)
         self.mav.robust_parsing = True
         self.target = target_system
         self.origin = origin
-        self.leg = Leg(tuple(route))
-        self.resume = Leg(tuple(resume_route))
-        self.attempts = attempts
-        self.rejoin = rejoin  # False: after a return it drives every waypoint of its way home (Operator.rejoin)
-        self.phase = "connect"
         self.out: list[bytes] = []
         self.next_heartbeat = 0.0
         self.next_retry = 0.0
@@ -110,11 +105,7 @@ class FirmwareOperator:
         self.rest_since: float | None = None
         self.sent_target: tuple[float, float] | None = None
         self.next_stick = 0.0
-        self.heading_to: tuple[float, float] | None = None
-        self.cut_off: tuple[float, float] | None = None
-        self.losses: dict[tuple[float, float], int] = {}
         self.rtl_requested = False
-        self.log: list[tuple[float, str]] = []
 
     # ----- what it hears -------------------------------------------------------------------------------------
     def feed(self, data: bytes, t: float) -> None:
@@ -184,7 +175,7 @@ class FirmwareOperator:
     def request_rtl(self, t: float) -> None:
         """A scripted RTL (the scenario's ``rtl`` event): the operator switches the firmware to RTL."""
         self.rtl_requested = True
-        self.log.append((t, "rtl requested"))
+        self._say(t, "rtl requested")
 
     def tick(self, t: float) -> list[bytes]:
         self.out = []
@@ -204,7 +195,7 @@ class FirmwareOperator:
         if self.phase in ("connect", "guided", "arming"):
             self._set_up(t, retry)
         elif not self.fresh(t):
-            self.cut_off = self.heading_to or self.cut_off
+            self._lost_on_the_way()
             if self.lets_go and self.mode == GUIDED and self.phase in ("driving", "resuming"):
                 self._hold_still(t)  # the picture froze: it lets go of the stick (see ``_hold_still``)
         elif self.mode in RETURN_MODES:
@@ -237,7 +228,7 @@ class FirmwareOperator:
                 self._set_mode(GUIDED)
         elif self.armed:
             self.phase = "driving"
-            self.log.append((t, "armed, driving"))
+            self._say(t, "armed, driving")
         elif retry:
             self.next_retry = t + RETRY_S
             self._command(apm.MAV_CMD_COMPONENT_ARM_DISARM, 1)
@@ -246,7 +237,7 @@ class FirmwareOperator:
         """A return mode (the failsafe's, or the one the operator asked for): once the rover holds or has stood
         still for REST_S, the operator counts the loss and takes it back in GUIDED, unless it asked for that RTL."""
         phase = self.phase
-        self.cut_off = self.heading_to or self.cut_off
+        self._lost_on_the_way()
         if self.speed < REST_SPEED:
             self.rest_since = t if self.rest_since is None else self.rest_since
         else:
@@ -260,7 +251,7 @@ class FirmwareOperator:
             self.next_retry = t + RETRY_S
             self._set_mode(GUIDED)
             self.sent_target = None
-            self.log.append((t, "taking control back"))
+            self._say(t, "taking control back")
             if phase == "driving":
                 self.phase = "resuming"
             self._rejoin()
@@ -268,21 +259,18 @@ class FirmwareOperator:
     def _count_loss(self) -> None:
         """The rover came back without the link: the waypoint it was driving toward counts one loss, once (it is
         driven toward again only when the operator drives again)."""
-        if self.cut_off is not None:
-            self.losses[self.cut_off] = self.losses.get(self.cut_off, 0) + 1
-            self.cut_off = None
+        super()._count_loss()
         self.heading_to = None
 
     def _rejoin(self) -> None:
         """After a return, the resume route picked up where the native operator picks it up (``Leg.join``)."""
-        if self.rejoin and self.phase == "resuming" and self.position is not None:
-            self.resume.join(*self.position)
+        self._pick_up_way_home(self.position)
 
     def _drive(self, leg: Leg, t: float) -> None:
         while not leg.done:
             x, y, speed = leg.points[leg.index]
             place = (x, y)
-            if self.losses.get(place, 0) >= self.attempts:  # lost the link on the way there often enough
+            if self._given_up(place):  # lost the link on the way there often enough
                 leg.index += 1
                 continue
             if self.position is not None and math.dist(place, self.position) < WAYPOINT_RADIUS:

@@ -1,12 +1,11 @@
-"""The two pictures of a firmware run, like a native run's: where the rover went (true frame, coloured by the
-firmware's mode, with the loss and rest points and the EKF's path) and what the firmware did over time (its mode
-timeline against the radio link and the distance driven back). A companion run's return is its return-service
-lease, which drives in GUIDED: that is what its pictures mark as the return.
+"""The timeline of a run of a real autopilot, as a native run has one of its leases: what the autopilot did over
+time (its mode timeline against the radio link and the distance driven back). A companion run's return is its
+return-service lease, which drives in GUIDED: that is what its timeline counts as the return. Its trajectory is
+every run's (``sim.report.trajectory``).
 
-``run`` is a ``sim.runner.Run`` of a firmware plant, or a ``sim serve`` server of one (``sim.firmware.serve``): both
-have the plant (``run.plant``: its rows, its link, the times it heard its station), the world and the scenario. A
-run of PX4 (``sim.plants.px4``) has the same record; its plant names its modes (``mode_names``, ``return_modes``,
-``autopilot``), which default to ArduPilot's."""
+``run`` is a ``sim.runner.Run`` of an autopilot's plant: it has the plant (``run.plant``: its rows, its link, the
+times it heard its station), the world and the scenario. A run of PX4 (``sim.plants.px4``) has the same record;
+its plant names its modes (``mode_names``, ``return_modes``, ``autopilot``), which default to ArduPilot's."""
 
 from __future__ import annotations
 
@@ -16,13 +15,8 @@ import numpy as np
 
 from sim.firmware.lockstep import MODE_NAMES
 from sim.firmware.operator import RETURN_MODES
-from sim.plots import draw_world, plt, save
+from sim.plots import plt, save
 from vehicle.lease import Holder
-
-MODE_COLOURS = {"GUIDED": "tab:green", "HOLD": "tab:orange", "RTL": "tab:red", "SMART_RTL": "tab:blue",
-                "MANUAL": "0.5",
-                # PX4's nav states (``sim.plants.px4``): Offboard is its GUIDED, AUTO_LOITER its Hold
-                "OFFBOARD": "tab:green", "AUTO_LOITER": "tab:orange", "AUTO_RTL": "tab:red"}
 
 
 def _columns(run) -> dict[str, np.ndarray]:
@@ -39,41 +33,6 @@ def _returning(run, modes: np.ndarray) -> np.ndarray:
     if run.plant.leases and trace is not None:
         return np.array(trace.holder, dtype=int) == int(Holder.RETURN_SERVICE)
     return np.isin(modes, tuple(getattr(run.plant, "return_modes", RETURN_MODES)))
-
-
-def trajectory(run, path: Path) -> Path:
-    c = _columns(run)
-    m = run.metrics or {}
-    names = getattr(run.plant, "mode_names", MODE_NAMES)
-    autopilot = getattr(run.plant, "autopilot", "ArduPilot")
-    fig, ax = plt.subplots(figsize=(11, 8))
-    draw_world(ax, run.world, run.scenario.bounds)
-    estimator = "firmware EKF" if autopilot == "ArduPilot" else f"{autopilot} EKF2"
-    ax.plot(c["ey"], c["ex"], color="0.55", lw=0.8, ls="--", label=f"{estimator} estimate (true frame via its origin)")
-    modes = c["mode"].astype(int)
-    for k in np.unique(modes):
-        name = names.get(int(k), str(k))
-        sel = np.where(modes == k, 1.0, np.nan)
-        ax.plot(c["y"] * sel, c["x"] * sel, color=MODE_COLOURS.get(name, "k"), lw=1.6, label=f"true path, {name}")
-    companion = run.plant.leases  # returnlink companion beside the firmware
-    if companion:
-        sel = np.where(_returning(run, modes), 1.0, np.nan)
-        ax.plot(c["y"] * sel, c["x"] * sel, color="tab:blue", lw=3.2, alpha=0.6,
-                label="true path under the companion's return lease")
-    rest = "at rest after the return (true)" if companion else "at rest after the failsafe (true)"
-    for key, marker, colour, label in (("loss_position", "X", "tab:red", "link lost (last heard, true)"),
-                                       ("rest_position", "s", "tab:blue", rest)):
-        p = m.get(key)
-        if p:
-            ax.plot(p[1], p[0], marker=marker, ms=12, color=colour, mfc="white" if marker == "s" else colour,
-                    zorder=9, label=label)
-    ax.set_title(f"{run.scenario.name} ({autopilot} firmware, seed {run.seed}, policy {run.policy}; true frame): "
-                 f"{'PASSED' if m.get('passed') else 'FAILED'}, back {m.get('distance_back_m')} m")
-    handles, labels = ax.get_legend_handles_labels()
-    uniq = dict(zip(labels, handles, strict=True))
-    ax.legend(uniq.values(), uniq.keys(), loc="upper left", bbox_to_anchor=(1.04, 1.0), borderaxespad=0.0,
-              fontsize=7)  # beside the map: inside, it hid the place where the link was lost
-    return save(fig, path)
 
 
 def timeline(run, path: Path) -> Path:

@@ -28,8 +28,8 @@ import numpy as np
 from link.radio import RadioParams
 from sim.maps import coverage
 from sim.maps.grid import Grid, Site
-from sim.operator import WAYPOINT_RADIUS
 from sim.scenario import Scenario
+from sim.station_script import WAYPOINT_RADIUS
 from sim.world import Station
 from sim.worlds import build, check
 

@@ -9,17 +9,21 @@ scenario's timed events and jams, RADIO_STATUS, the per-tick record, the .tlog, 
 one metrics pipeline, one verdict (``sim.metrics``). So a plant is compared with another in the very same world,
 packet fates and operator script, as ArduPilot's SITL flies many physics backends behind one packet contract.
 
-The loop never reaches into a plant beyond this protocol, and a plant never imports the loop: it is handed what it
+The same plants fly in real time (``sim.serve.Server``, `sim serve`): the lockstep loop's tick paced to the wall
+clock, with ground stations of one's own behind the radio proxy instead of the scripted ones.
+
+The loops never reach into a plant beyond this protocol, and a plant never imports a loop: it is handed what it
 needs (the scenario, the seed, the frames the radio delivered) and answers in plain values.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from pathlib import Path
 from typing import Any, Protocol
 
 from link.radio import LinkState
+from sim.compare import Repeatability
 from sim.robots import Robot
 from sim.scenario import Event, Station
 from sim.world import World
@@ -50,6 +54,7 @@ class Plant(Protocol):
     hears_last: bool
     rows: list[tuple] | None  # the plant's own per-tick rows (t, true x, true y, est x, est y, ...), or None
     stale: int  # actuations its own audit found outside the lease (the companion's router: frames it forwarded)
+    repeatability: Repeatability  # how far two runs of one trial may differ (``sim.compare``; exact for a native one)
     contingency: Any  # the link-loss baseline (``sim.policies``) its vehicle flies instead of the return plan, or None
 
     @property
@@ -80,8 +85,16 @@ class Plant(Protocol):
     def frames(self, t: float) -> list[bytes]:
         """What the vehicle's radio sends to the ground this tick."""
 
-    def receive(self, frames: list[tuple[bytes, str]], t: float) -> None:
-        """What the radio delivered to the vehicle by ``t``: (bytes, sending station) in arrival order."""
+    def receive(self, frames: list[tuple[bytes, Hashable]], t: float) -> None:
+        """What the radio delivered to the vehicle by ``t``: (bytes, where from: the sending station's name, or its
+        UDP address when served) in arrival order."""
+
+    def replies(self) -> list[bytes]:
+        """The answers to what was received since the last tick, without a tick: what a real-time loop serving its
+        link between ticks sends at once (docs/architecture.md §8)."""
+
+    def pinned(self) -> list[Hashable]:
+        """The addresses a real-time transport must never drop from its peer table (the owner's)."""
 
     def tick(self, t: float) -> None:
         """The vehicle's own tick (and, for a plant without a clock of its own, the physics step after it)."""
@@ -99,7 +112,10 @@ class Plant(Protocol):
         the operator's channel."""
 
     def status(self) -> str:
-        """What the progress line says of the plant besides the time."""
+        """What the progress line (and a served run's status line) says of the plant besides the time."""
+
+    def started(self) -> str:
+        """What a served run says once ``start`` has returned (the autopilot's version and boot time), or ""."""
 
     # ----- the figures ---------------------------------------------------------------------------------------
     def figures(self, run: Any) -> dict:

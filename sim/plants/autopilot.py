@@ -19,6 +19,7 @@ from sim.firmware import metrics
 from sim.jams import RADIO_EVENTS
 from sim.robots import make_robot
 from sim.scenario import Event, Scenario
+from sim.summary import summary
 
 DT = 0.02  # the loop's tick (sim.plants.native.TICK_RATE): what moves around the autopilot moves at this pace
 
@@ -33,6 +34,7 @@ class AutopilotPlant:
     leases = False
     vehicle = None  # no returnlink aboard
     stale = 0  # no lease to audit against
+    repeatability = metrics.REPEATABILITY  # within the autopilot's own determinism (its threads, its timing)
     contingency = None  # no returnlink aboard, so no baseline flown in its place
 
     kind: str
@@ -140,6 +142,15 @@ class AutopilotPlant:
     def radio_status(self, state: LinkState, t: float) -> None:
         """The autopilot reads no RADIO_STATUS of its own link here: its failsafe hears the radio's frames."""
 
+    def replies(self) -> list[bytes]:
+        """Nothing between ticks: what was received went to the autopilot at once, which answers in its own time
+        (its frames leave with the next tick's)."""
+        return []
+
+    def pinned(self) -> list:
+        """No address to keep: the autopilot keeps its own ground stations."""
+        return []
+
     # ----- the record ----------------------------------------------------------------------------------------
     def estimate(self) -> tuple[float, float]:
         return self._autopilot_estimate()
@@ -152,8 +163,14 @@ class AutopilotPlant:
                           self.world.collisions))
 
     def status(self) -> str:
-        mode = self.link.tap.mode
-        return f"  {'?' if mode is None else self._mode_name(mode):<12}"
+        """The autopilot's mode and whether it is armed."""
+        tap = self.link.tap
+        mode = "?" if tap.mode is None else self._mode_name(tap.mode)
+        return f"  {mode:<12} {'armed' if tap.armed else 'disarmed'}"
+
+    def started(self) -> str:
+        """The autopilot's version and how long it took to boot."""
+        return f"{self.link.tap.version or self.autopilot} ready after {self.link.boot_s:.1f} simulated s"
 
     # ----- the figures ---------------------------------------------------------------------------------------
     @property
@@ -165,15 +182,18 @@ class AutopilotPlant:
         return metrics.figures(run)
 
     def summary(self, run, m: dict) -> str:
-        return metrics.summary(run, m)
+        """The one summary, with the autopilot's version and boot under its first line."""
+        return summary(run, m, [f"  firmware {m['firmware']} (booted in {self.link.boot_s:.1f} simulated s before "
+                                "scenario time 0)"])
 
     @staticmethod
     def pictures(run, out: Path) -> list[Path]:
-        """trajectory.png and timeline.png of the modes (``sim.firmware.report``); matplotlib is imported only when
-        plots are drawn (about 0.4 CPU-s)."""
-        from sim.firmware import report
+        """trajectory.png (every run's, ``sim.report``) and timeline.png of the modes (``sim.firmware.report``);
+        matplotlib is imported only when plots are drawn (about 0.4 CPU-s)."""
+        from sim import report
+        from sim.firmware import report as modes_report
 
-        return [report.trajectory(run, out / "trajectory.png"), report.timeline(run, out / "timeline.png")]
+        return [report.trajectory(run, out / "trajectory.png"), modes_report.timeline(run, out / "timeline.png")]
 
 
 __all__ = ["DT", "AutopilotPlant"]

@@ -13,31 +13,47 @@ The rover carries the native rover's lidar, whose driver on the vehicle sends th
 
 from __future__ import annotations
 
+from collections.abc import Hashable
+from pathlib import Path
+
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from link.proxy import RadioReport
 from link.radio import LinkState, subsystem_rng
+from link.storage import remove_leftovers
 from sim import metrics
 from sim.plants.lidar import Lidar
 from sim.scenario import Event
+from sim.summary import summary
 from vehicle.companion import router
 from vehicle.companion.app import Companion
 from vehicle.companion.ranges import KINDS as RANGE_KINDS
 from vehicle.lease import Holder
+from vehicle.lease_terms import State
 from vehicle.params import Params, load_defaults
 
 # what a forwarded frame needs to be audited: it changes the robot's state under a lease
 AUDITED = frozenset((router.Authority.LEASE, router.Authority.MODE))
 COMPID_AT = {0xFD: 6, 0xFE: 4}  # MAVLink 2 / 1 start byte -> the byte that holds the sender's component id
 AIR_RADIO = "radio"  # the source the vehicle-side radio's frames come from, on the companion's ground side
+STATE_NAMES = {v: k.lower().replace("_", " ") for k, v in vars(State).items() if k.isupper()}
 
 
-def companion_params(scenario_params: dict[str, float], body_radius: float) -> Params:
+def companion_params(scenario_params: dict[str, float], body_radius: float, param_file: Path | None = None) -> Params:
     """The companion's returnlink parameters in a run: the defaults, RTL_BODY_R the robot's footprint (as its
     integrator would set a real one's, and as the native vehicle's is set: ``sim.driver``), then the scenario's own.
-    With the footprint the return keeps the body off what the rover's range sensors see (``vehicle.standoff``)."""
-    params = load_defaults()
-    params.set("RTL_BODY_R", body_radius)
+    With the footprint the return keeps the body off what the rover's range sensors see (``vehicle.standoff``).
+
+    A served companion boots from ``param_file`` (``sim serve --params``: a torn write's leftovers cleared first;
+    StoredFileError if it is damaged) when it exists, the footprint being then the file's, as the native vehicle
+    boots from its own (``sim.driver.simulated_vehicle``)."""
+    if param_file is not None:
+        remove_leftovers(param_file)
+    if param_file is not None and param_file.is_file():
+        params = load_defaults(param_file)
+    else:
+        params = load_defaults()
+        params.set("RTL_BODY_R", body_radius)
     for k, v in scenario_params.items():
         params.set(k, v)
     return params
@@ -113,6 +129,17 @@ class CompanionSide:
         robot: no radio hop, no loss)."""
         self.companion.from_ground(self.air_radio.frame(state), t, AIR_RADIO)
 
+    def pinned(self) -> list[Hashable]:
+        """The owner's ground address, which a real-time transport must keep."""
+        return self.companion.pinned()
+
+    def close(self) -> None:
+        """The autopilot stopped, then the companion's signing timestamp to disk."""
+        try:
+            super().close()
+        finally:
+            self.companion.close()
+
     def _to_autopilot(self, data: bytes) -> None:
         """The companion's wire to the autopilot; a ground frame it forwards is audited on the way."""
         at = COMPID_AT.get(data[0]) if data else None
@@ -150,6 +177,16 @@ class CompanionSide:
         ox, oy = self.frame_offset
         return ox + p.x, oy + p.y
 
+    def status(self) -> str:
+        """The autopilot's mode, and the companion's lease: its state and holder."""
+        v = self.vehicle
+        if v is None:
+            return f"{super().status()}  companion booting"
+        s = v.status()
+        cur = s.book.current
+        holder = "none" if cur is None else cur.holder.name.lower()
+        return f"{super().status()}  lease {STATE_NAMES.get(s.state, '?')} ({holder})"
+
     def range_words(self) -> str:
         """What the companion heard of the rover's range data, for the summary."""
         r = self.companion.driver.ranges
@@ -176,14 +213,11 @@ class CompanionSide:
 
     def summary(self, run, m: dict) -> str:
         """The native summary, with the autopilot, what the companion passed and refused, and its modes."""
-        lines = metrics.summary(run, m).splitlines()
         c = self.companion.counters
         name, where, to, its, modes_title = self.WORDS
-        extra = [f"  {name.format(version=m['firmware'])} (booted in {self.link.boot_s:.1f} simulated s before "
+        about = [f"  {name.format(version=m['firmware'])} (booted in {self.link.boot_s:.1f} simulated s before "
                  f"scenario time 0), returnlink companion on its {where}",
                  f"  the companion forwarded {c['forwarded']} ground frames to {to}, refused {c['refused']}, "
                  f"relayed {c['relayed']} of {its} to the ground; keepalives {self.companion.driver.keepalives}",
                  f"  {self.range_words()}"]
-        modes = [f"  {modes_title}:"] + [f"    {e['t']:7.2f} s  {e['mode']}" for e in m["firmware_modes"]]
-        notes = [f"  note: {n}" for n in run.notes]
-        return "\n".join([lines[0], *extra, *lines[1:-1], *modes, *notes, lines[-1]])
+        return summary(run, m, about, modes_title)

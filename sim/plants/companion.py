@@ -65,7 +65,7 @@ class CompanionPlant(CompanionSide, FirmwarePlant):
                  speedup: float = SPEEDUP, params: Params | None = None, **companion_options) -> None:
         super().__init__(scenario, kind, seed, policy, firmware, log_path, speedup)
         if params is None:
-            params = companion_params(scenario.params, self.robot.shape.radius)
+            params = companion_params(scenario.params, self.robot.shape.radius, companion_options.get("param_file"))
         self._init_companion(params, "the ArduPilot firmware", companion_options)
 
     def _make_operator(self, sc: Scenario) -> CompanionOperator:

@@ -31,7 +31,7 @@ from pathlib import Path
 from link.radio import subsystem_rng
 from sim.firmware import rangefinders
 from sim.firmware.lockstep import MODE_NAMES, SKID_PARAMS, SPEEDUP, Lockstep
-from sim.firmware.operator import FirmwareOperator
+from sim.firmware.operator import RETURN_MODES, FirmwareOperator
 from sim.firmware.rangefinders import Rangefinders
 from sim.plants.autopilot import AutopilotPlant
 from sim.policies import (
@@ -94,6 +94,9 @@ class FirmwarePlant(AutopilotPlant):
     kind = FIRMWARE_VEHICLE
     policies: tuple[str, ...] = FAILSAFE_POLICIES  # what this plant flies
     autopilot = "ArduPilot"
+    # what the modes mean, for the figures and pictures
+    mode_names = MODE_NAMES
+    return_modes = RETURN_MODES
 
     def __init__(self, scenario: Scenario, kind: str = FIRMWARE_VEHICLE, seed: int | None = None,
                  policy: str = DEFAULT_FIRMWARE_POLICY, firmware: Path | None = None, log_path: Path | None = None,

@@ -9,17 +9,21 @@ the scripted operator (``sim.operator.Operator``) on it.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import itertools
+import math
+from collections.abc import Callable, Hashable
 from pathlib import Path
 
 from gcs.plans import from_plan_items
 from gcs.station import GroundStation
 from link.radio import LinkState
+from sim.compare import EXACT
 from sim.driver import simulated_vehicle
-from sim.metrics import lease_figures, summary
+from sim.metrics import lease_figures
 from sim.operator import Operator
 from sim.policies import check_policy, make_policy
 from sim.scenario import Event, Scenario, Station
+from sim.summary import summary
 from vehicle.core import DT
 
 # Tick k is at k / TICK_RATE s: the double nearest k * DT, which is what rounding the running sum to 9 decimals
@@ -37,12 +41,19 @@ class NativePlant:
     rows = None  # the loop's trace is the whole record
     frame_offset = (0.0, 0.0)  # the vehicle's frame is the true one: its estimator starts at its true pose
     stale = 0  # no guard of its own beside the vehicle's, which the loop audits
+    repeatability = EXACT  # deterministic: the same scenario and seed give the same metrics, bit for bit
 
-    def __init__(self, scenario: Scenario, kind: str, seed: int, policy: str) -> None:
+    def __init__(self, scenario: Scenario, kind: str, seed: int, policy: str, param_file: Path | None = None,
+                 boot_epoch: int | None = None, on_epoch: Callable[[int], str | None] | None = None,
+                 **endpoint_options) -> None:
+        """``param_file``, ``boot_epoch``, ``on_epoch`` and ``endpoint_options`` (a key, a signing clock): what a
+        served vehicle boots with and keeps (``sim.serve.served_boot``); a lockstep run gives none of them."""
         self.scenario = scenario
         self.kind = kind
         self.contingency = make_policy(check_policy(policy))  # None: the return plan flies
-        self.driver, self.vehicle, self.endpoint = simulated_vehicle(scenario, kind, seed, contingency=self.contingency)
+        self.driver, self.vehicle, self.endpoint = simulated_vehicle(scenario, kind, seed, param_file, boot_epoch,
+                                                                     contingency=self.contingency, on_epoch=on_epoch,
+                                                                     **endpoint_options)
         self.world = self.driver.world
         self.robot = self.driver.robot
         # called every tick: bound once (the physics step's three calls are ``SimDriver.advance``'s, made here so
@@ -89,19 +100,32 @@ class NativePlant:
         """Nothing to start: the vehicle booted when it was made."""
 
     def pace(self, tick: Callable[[float], bool], duration: float) -> None:
-        """Tick after tick, at once."""
-        for k in range(1, int(round(duration / DT)) + 1):
+        """Tick after tick, at once (a real-time loop waits in ``tick``); with no end when ``duration`` is
+        infinite."""
+        ticks = range(1, int(round(duration / DT)) + 1) if math.isfinite(duration) else itertools.count(1)
+        for k in ticks:
             if not tick(k / TICK_RATE):
                 return
 
     def close(self) -> None:
-        """Nothing outside this process."""
+        """The signing timestamp to disk, if the vehicle signs with a kept key (nothing runs outside this
+        process)."""
+        self.endpoint.close()
 
     # ----- one tick ------------------------------------------------------------------------------------------
-    def receive(self, frames: list[tuple[bytes, str]], t: float) -> None:
+    def receive(self, frames: list[tuple[bytes, Hashable]], t: float) -> None:
+        """Each frame with where it came from (a station's name, or a UDP address when served), which the
+        endpoint remembers per sender so a transport can keep the owner's (``pinned``)."""
         receive = self.endpoint.receive
-        for data, _src in frames:
-            receive(data, t)
+        for data, src in frames:
+            receive(data, t, src)
+
+    def replies(self) -> list[bytes]:
+        """The endpoint's answers to what it received since its tick, without a tick."""
+        return self.endpoint.replies()
+
+    def pinned(self) -> list[Hashable]:
+        return self.endpoint.pinned()
 
     def tick(self, t: float) -> None:
         """The vehicle loop's tick, then one physics step of DT: the robot pushes, pymunk steps, the robot reads
@@ -124,6 +148,10 @@ class NativePlant:
         """No row of its own (``rows`` is None: never called)."""
 
     def status(self) -> str:
+        """The mode the vehicle shows (its heartbeat's custom_mode) and who owns it."""
+        return f"  state {self.endpoint.custom_mode():#010x}  owner {self.vehicle.status().book.owner}"
+
+    def started(self) -> str:
         return ""
 
     # ----- the figures ---------------------------------------------------------------------------------------

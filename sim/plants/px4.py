@@ -134,5 +134,9 @@ class PX4Plant(AutopilotPlant):
     def _mode_name(self, mode: int) -> str:
         return nav_state_name(mode)
 
+    def started(self) -> str:
+        """As every autopilot says it, and that PX4 arms only for a ground station it has heard."""
+        return f"{super().started()}; it arms once it has heard a ground station"
+
 
 __all__ = ["HOLD", "OFFBOARD", "RETURN", "PX4Plant", "px4_params"]

@@ -71,7 +71,7 @@ class PX4CompanionPlant(CompanionSide, PX4Plant):
         super().__init__(scenario, kind, seed, policy, px4, log_path, accept_timeout_s)
         self.lnk_timeout = float(scenario.params.get("LNK_TIMEOUT", 3.0))  # the companion's, not PX4's
         if params is None:
-            params = companion_params(scenario.params, self.robot.shape.radius)
+            params = companion_params(scenario.params, self.robot.shape.radius, companion_options.get("param_file"))
         self._init_companion(params, "PX4", companion_options)
 
     @staticmethod

@@ -88,7 +88,7 @@ class PX4CompanionOperator(ThroughCompanion, PX4Operator):
                 self.held_since = t if self.held_since is None else self.held_since
                 if t - self.held_since >= HOLD_WAIT_S and self.fresh(t) and t >= self.next_retry:
                     self.next_retry = t + RETRY_S
-                    self.log.append((t, "back to offboard after a hold"))
+                    self._say(t, "back to offboard after a hold")
                     self._set_mode(OFFBOARD)
                 return
             self.held_since = None
@@ -100,7 +100,7 @@ class PX4CompanionOperator(ThroughCompanion, PX4Operator):
         # the return holds the lease: what was being driven toward counts as cut off; the stream goes on, aimed
         # where the rover stands (refused by the companion, heard all the same)
         self.returned = True
-        self.cut_off = self.heading_to or self.cut_off
+        self._lost_on_the_way()
         self.sent_target = None
         if self.position is not None:
             self.setpoint = ("position", *self.position)

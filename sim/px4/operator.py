@@ -183,14 +183,14 @@ class PX4Operator(FirmwareOperator):
         if phase == "offboard":
             if self.mode == OFFBOARD:
                 self.phase = self.after_arming
-                self.log.append((t, "offboard, driving"))
+                self._say(t, "offboard, driving")
             elif retry:
                 self.next_retry = t + RETRY_S
                 self._set_mode(OFFBOARD)
             return
         fresh = self.fresh(t)
         if not fresh:
-            self.cut_off = self.heading_to or self.cut_off
+            self._lost_on_the_way()
             self._hold_still(t)  # the picture froze: it stops pushing (the stream goes on, as Offboard needs)
             return
         if self.mode in RETURN_MODES or not self.armed:
@@ -217,7 +217,7 @@ class PX4Operator(FirmwareOperator):
         if self.armed:
             self.phase = "offboard"
             self.next_retry = t
-            self.log.append((t, "armed"))
+            self._say(t, "armed")
         elif retry:
             self.next_retry = t + RETRY_S
             self._command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1)
@@ -225,7 +225,7 @@ class PX4Operator(FirmwareOperator):
     def _after_failsafe(self, t: float, retry: bool) -> None:
         """PX4's failsafe holds the rover (or drove it back and it rests, or disarmed it): note the loss against
         the waypoint it was heading to, and once it is at rest take control again."""
-        self.cut_off = self.heading_to or self.cut_off
+        self._lost_on_the_way()
         if self.speed < REST_SPEED:
             self.rest_since = t if self.rest_since is None else self.rest_since
         else:
@@ -236,7 +236,7 @@ class PX4Operator(FirmwareOperator):
         if self.phase == "rtl":
             return  # the operator asked for this return: it leaves the rover where Return took it
         self._count_loss()
-        self.log.append((t, "taking control back"))
+        self._say(t, "taking control back")
         self.after_arming = "resuming"
         if self.rejoin and self.position is not None:
             self.resume.join(*self.position)  # picked up as the native operator picks it up (``Leg.join``)

@@ -18,8 +18,8 @@ from dataclasses import replace
 
 from link.plan_items import LEASE_BOUNDARY, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_RETURN_TO_LINK
 from link.radio import RadioParams
-from sim.operator import WAYPOINT_RADIUS
 from sim.scenario import Criteria, Scenario
+from sim.station_script import WAYPOINT_RADIUS
 from sim.world import Station, Wall
 from sim.worlds import check
 from sim.worlds import geometry as geo

@@ -22,8 +22,8 @@ from dataclasses import dataclass, replace
 
 from link.plan_items import NAV_RETURN_TO_LINK
 from link.radio import Radio
-from sim.operator import WAYPOINT_RADIUS
 from sim.robots import LeggedSpec, RoverSpec
+from sim.station_script import WAYPOINT_RADIUS
 from sim.worlds import geometry as geo
 from vehicle.params import BY_NAME
 

@@ -1,5 +1,6 @@
 """The firmware's runs under the names and signatures their callers know (``benchmarks/firmware_bench.py``, the
-firmware tests): ``FirmwareRun`` (its own failsafes) and ``CompanionRun`` (returnlink companion beside it).
+firmware tests): ``FirmwareRun`` (its own failsafes) and ``CompanionRun`` (returnlink companion beside it). They sit
+beside the loop they fix a plant of, not in ``sim/firmware/``, which the plants build on and so never imports them.
 
 Each is the one simulator loop (``sim.runner.Run``) with its plant fixed (``sim.plants.firmware``,
 ``sim.plants.companion``); the loop's hooks (``_boot``, ``_loop``, ``_tick``) are there to override as for any
