@@ -79,6 +79,7 @@ class Firmware:
         self.armed = False
         self.position: tuple[float, float] | None = None
         self.speed = 0.0
+        self.clock: float | None = None  # s: the firmware's own time (time_boot_ms of its last message stamped)
         self.texts: list[str] = []
 
     def boot(self, timeout: float = 60.0) -> None:
@@ -116,7 +117,8 @@ class Firmware:
         assert code is None, f"the firmware exited with {code}; see {self.log}: {self.log.read_text()[-800:]}"
 
     def watch(self) -> None:
-        """Take what the observer has received (non-blocking): mode, armed, position, speed, texts."""
+        """Take what the observer has received (non-blocking): mode, armed, position, speed, texts, and the
+        firmware's own clock from the time_boot_ms it stamps on its messages (tests time on it, never on ours)."""
         o = self.observer
         if o is None:
             return
@@ -125,6 +127,9 @@ class Firmware:
             if m is None:
                 return
             kind = m.get_type()
+            boot_ms = getattr(m, "time_boot_ms", None)
+            if boot_ms is not None and m.get_srcComponent() == 1:
+                self.clock = boot_ms / 1000
             if kind == "HEARTBEAT" and m.get_srcComponent() == 1 and m.autopilot != 8:
                 self.mode, self.armed = m.custom_mode, bool(m.base_mode & 128)
             elif kind == "LOCAL_POSITION_NED":

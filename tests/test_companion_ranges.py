@@ -178,8 +178,8 @@ def test_without_range_data_the_driver_reads_no_scan_as_before():
 
 
 def test_the_companion_asks_the_autopilot_for_its_rangefinders():
-    from vehicle.companion.autopilot import STREAMS
     from vehicle.companion.px4 import STREAMS as PX4_STREAMS
+    from vehicle.companion.rules import STREAMS
 
     assert STREAMS[apm.MAVLINK_MSG_ID_DISTANCE_SENSOR] <= 100_000
     assert PX4_STREAMS[apm.MAVLINK_MSG_ID_DISTANCE_SENSOR] <= 100_000

@@ -31,7 +31,7 @@ from tests.px4_standin import INT32, PX4_DEFAULTS, REAL32, FakePX4
 from tests.test_companion_cli import FakeAutopilotServer
 from tests.test_px4_plant import ROOT, Started
 from vehicle.companion import px4
-from vehicle.companion.autopilot import ArduPilotRules, PX4Rules
+from vehicle.companion.rules import ArduPilotRules, PX4Rules
 from vehicle.companion.setup import PX4_NEEDS, check, differing, needs_for
 from vehicle.lease import ExpireReason
 from vehicle.params import Params

@@ -4,9 +4,12 @@ Everything that decides runs the native code: the lease book, the link watch, th
 navigator live in the native vehicle core, which the companion boots (``vehicle.core``) and then sees only through
 its port (``vehicle.port.VehiclePort``: the command authority, the status snapshot, the event queue); component 191
 is ``vehicle.endpoint.Endpoint`` composing the native microservices (``vehicle.services``) with the companion's
-identity, the streams it owns and no teleop (``SERVICES``). What is added is only what sits between two links:
-``router`` decides what of the ground's traffic the autopilot may hear, ``AutopilotDriver`` turns the autopilot into
-the vehicle's robot, and ``GroundVoice`` relays the autopilot to the ground. No clock and no socket: bytes come in
+identity, the streams it owns and no teleop (``SERVICES``). What is added is only what sits between two links, each
+in its own module: on the ground side ``router`` decides what of the ground's traffic the autopilot may hear and
+``gate`` asks the vehicle's port where the router says to, and ``GroundVoice`` relays the autopilot to the ground; on
+the vehicle side ``AutopilotDriver`` turns the autopilot into the vehicle's robot and ``DriveWatch`` holds the
+owner's drive when the owner falls silent (the dead-man, LNK_HOLD_S). This class wires them: frames in, the tick,
+frames out. No clock and no socket: bytes come in
 through ``from_autopilot`` / ``from_ground``, go out through the two callables given, and ``tick(t)`` runs the 50 Hz
 loop at the time it is given, so the same object runs under ``returnlink companion`` (wall clock, real links) and in
 a lockstep simulation.
@@ -25,27 +28,28 @@ messages a second, and a telemetry radio has better uses for its air time.
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Callable, Hashable
 from functools import partial
 from pathlib import Path
+from typing import NamedTuple
 
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from link.mission import Origin
 from link.signing import Key, SigningVerdict, Streams, sim_stamp
-from vehicle.companion import router
-from vehicle.companion.autopilot import AutopilotDriver, is_autopilot_heartbeat, rover_problem
+from vehicle.companion import gate, router
+from vehicle.companion.autopilot import AutopilotDriver
+from vehicle.companion.drive_watch import SETPOINTS, DriveWatch
 from vehicle.companion.ranges import KINDS as RANGE_KINDS
 from vehicle.companion.ranges import QUIET_S
-from vehicle.companion.router import COMPANION_COMPID, Action, Authority, Decision, Dest
-from vehicle.companion.voice import GroundVoice, frame_msgid
-from vehicle.core import boot_core
+from vehicle.companion.router import COMPANION_COMPID, Action, Authority, Decision, Dest, Routing
+from vehicle.companion.rules import is_autopilot_heartbeat, rover_problem
+from vehicle.companion.voice import GroundVoice, RangeRelay, frame_msgid
+from vehicle.core import Core, boot_core
 from vehicle.endpoint import Endpoint
 from vehicle.keystore import KeyStore, boot_stamp
-from vehicle.lease import ExpireReason, Holder, LeaseBook
+from vehicle.lease import ExpireReason
 from vehicle.params import Params
-from vehicle.port import VehiclePort
 from vehicle.radio_status import KINDS as RADIO_REPORTS
 from vehicle.radio_status import rssi_dbm
 from vehicle.services.native import vehicle_services
@@ -68,42 +72,25 @@ DUPLICATES = frozenset((apm.MAVLINK_MSG_ID_SYS_STATUS, apm.MAVLINK_MSG_ID_GPS_RA
 OWN_STREAMS = {msgid: interval for msgid, interval in DEFAULT_RATES.items() if msgid not in DUPLICATES}
 SERVICES = partial(vehicle_services, rates=OWN_STREAMS, drives=False)
 
-# the owner's drive of the autopilot in GUIDED: what the dead-man watches (MANUAL_CONTROL and RC override have the
-# autopilot's own override timeout, RC_OVERRIDE_TIME)
-SETPOINTS = frozenset(("SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT"))
-STOP_RESEND = 1.0  # s between repeated stops while the owner stays silent (one may be lost on the wire)
-HOLD_GAPS = 1.0  # the dead-man waits no shorter than the owner's longest recent gap between packets
-RHYTHM_S = 5.0  # s: the owner's gaps between packets over this long are its rhythm
-STREAM_S = 2.5  # s: the owner counts as driving with setpoints if it sent one this long before its last packet
+
+def parser() -> apm.MAVLink:
+    """A MAVLink parser that skips garbage rather than raising on it (a link is a wire, or a radio)."""
+    mav = apm.MAVLink(None, 0, 0)
+    mav.robust_parsing = True
+    return mav
 
 
-def drive_held(t: float, setpoint_at: float | None, owner_heard: float | None, hold_s: float,
-               rhythm: float) -> bool:
-    """The companion's dead-man (LNK_HOLD_S): the owner was driving the autopilot with setpoints (one within
-    STREAM_S of its last packet) and has been silent ``hold_after(hold_s, rhythm)``.
+class GroundFrame(NamedTuple):
+    """A frame from the ground as the companion judged it: its bytes, who sent it, from where, and whether its
+    signature holds (always, without a key)."""
 
-    The native vehicle drops a teleop setpoint 0.5 s after its stream stops; an autopilot drives on to the owner's
-    last position target for as long as nobody says otherwise, which before this rule was the whole LNK_TIMEOUT
-    before the return took it back (issue 28: some 3 m past the loss in the tunnel, 6 m on a field). Silence (no
-    packet at all, heartbeats included) is the test, so an owner is not held while its 1 Hz heartbeat arrives
-    (LNK_HOLD_S 1 s by default, a heartbeat's period; a stick let go while the heartbeat goes on is the autopilot's
-    own business, its velocity targets time out in 3 s). Below that a fixed time trips on sparse senders
-    (measured: at 0.7 s the scripted GUIDED operator, a heartbeat a second and a target a metre, was stopped
-    between its packets and never got going); above it the owner's own rhythm (``rhythm``: its longest gap
-    between its packets over the last RHYTHM_S, the radio's holes taken out: ``Companion._rhythm``) lets an owner
-    that sends sparsely drive. Measured on companion.toml's five worlds (50 trials each): LNK_HOLD_S 1.25 fixed,
-    P95 to link 6.3-17.2 s; 1.25 with 1.25x the rhythm, 6.3-20.8 s; 1 with the rhythm counting the radio's holes,
-    6.3-13.3 s; 1 with the owner's own rhythm, see the README's companion table. An owner that sent
-    one goal and then only its heartbeat is not streaming: the autopilot drives on to the goal, and LNK_TIMEOUT
-    governs."""
-    if hold_s <= 0 or setpoint_at is None or owner_heard is None or owner_heard - setpoint_at > STREAM_S:
-        return False
-    return t - owner_heard >= hold_after(hold_s, rhythm)
-
-
-def hold_after(hold_s: float, rhythm: float) -> float:
-    """Seconds of the owner's silence after which the dead-man holds the drive (see ``drive_held``)."""
-    return max(hold_s, HOLD_GAPS * rhythm)
+    m: object
+    raw: bytes
+    sender: int
+    scomp: int
+    seq: int
+    source: Hashable | None
+    trusted: bool
 
 
 class Companion:
@@ -129,14 +116,11 @@ class Companion:
         self.param_file, self.on_epoch = param_file, on_epoch
         self.autopilot_name = autopilot_name
         self.driver = AutopilotDriver(to_autopilot, pivots)
-        self.vehicle: VehiclePort | None = None
+        self.vehicle: Core | None = None
         self.endpoint: Endpoint | None = None
         saved = keystore.saved_stamp if keystore is not None else None
         self.voice = GroundVoice(self.key, stamp, boot_stamp(saved, stamp(0.0)))
-        self.ap_parser = apm.MAVLink(None, 0, 0)
-        self.ap_parser.robust_parsing = True
-        self.ground_parser = apm.MAVLink(None, 0, 0)
-        self.ground_parser.robust_parsing = True
+        self.ap_parser, self.ground_parser = parser(), parser()
         self.streams = Streams()
         self.t = 0.0
         self.identity_problem: str | None = None  # the autopilot is not an ArduPilot Rover
@@ -147,19 +131,10 @@ class Companion:
         self.sources: dict[int, Hashable] = {}  # ground sysid -> where its last trusted frame came from
         self.notice_at: dict[tuple[int, str], float] = {}
         self.counters = {"forwarded": 0, "refused": 0, "relayed": 0, "bad_frames": 0, "drive_held": 0}
-        self.setpoint_at: float | None = None  # the owner's last setpoint forwarded to the autopilot
-        self.gaps: deque[tuple[float, float]] = deque()  # (arrival, gap before it) of the owner's recent packets
-        self.heard_at: float | None = None  # the owner's last packet, as the rhythm last saw it
-        self.heard_seq: int | None = None  # its unwrapped sequence number (None: not measured)
-        self.stopped_at: float | None = None  # the dead-man's last stop (None: not holding)
-        # PX4: the owner's Offboard drive went to Hold (the dead-man, or PX4's own Offboard loss) and its next
-        # setpoint asks for Offboard again (``_resume_drive``); the mode last seen, and a ground mode change's time
-        self.held_drive = False
-        self.last_mode: int | None = None
-        self.ground_mode_at: float | None = None
+        self.drive = DriveWatch(self.driver)  # the dead-man over the owner's drive, PX4's held Offboard
         self.booted_at: float | None = None
         self.ranges_said: str | None = None  # what the companion said of the range data: "heard", "none" (once each)
-        self.range_relayed: dict[tuple, float] = {}  # (sysid, compid, message, sensor) -> when last relayed
+        self.range_relay = RangeRelay(RANGE_RELAY_S)
 
     # ----- input -----------------------------------------------------------------------------------------------
     def from_autopilot(self, data: bytes, t: float) -> None:
@@ -169,8 +144,7 @@ class Companion:
             msgs = self.ap_parser.parse_buffer(data) or []
         except Exception:  # noqa: BLE001 - a garbled stream must not stop the companion
             self.counters["bad_frames"] += 1
-            self.ap_parser = apm.MAVLink(None, 0, 0)
-            self.ap_parser.robust_parsing = True
+            self.ap_parser = parser()
             return
         d = self.driver
         for m in msgs:
@@ -181,21 +155,10 @@ class Companion:
             if d.seen.sysid is not None and self.identity_problem is None and is_autopilot_heartbeat(m) \
                     and m.get_srcSystem() == d.seen.sysid:
                 self.identity_problem = rover_problem(m)
-            if self._for_companion(m) or (m.get_type() in RANGE_KINDS and not self._relay_range(m, t)):
+            if self._for_companion(m) or (m.get_type() in RANGE_KINDS and not self.range_relay.passes(m, t)):
                 continue
             self.to_ground(self.voice.relay(m))
             self.counters["relayed"] += 1
-
-    def _relay_range(self, m, t: float) -> bool:
-        """Whether this range message goes on to the ground: a sensor's first in RANGE_RELAY_S."""
-        key = (m.get_srcSystem(), m.get_srcComponent(), m.get_type(), getattr(m, "id", 0),
-               getattr(m, "orientation", 0))
-        if t - self.range_relayed.get(key, -math.inf) < RANGE_RELAY_S:
-            return False
-        if len(self.range_relayed) >= 1024:  # (a vehicle has a few dozen sensors: anything more is noise)
-            self.range_relayed.clear()
-        self.range_relayed[key] = t
-        return True
 
     def _for_companion(self, m) -> bool:
         fields = m.get_fieldnames()
@@ -209,8 +172,7 @@ class Companion:
             msgs = self.ground_parser.parse_buffer(data) or []
         except Exception:  # noqa: BLE001 - a hostile byte stream must never take the companion down
             self.counters["bad_frames"] += 1
-            self.ground_parser = apm.MAVLink(None, 0, 0)
-            self.ground_parser.robust_parsing = True
+            self.ground_parser = parser()
             return
         for m in msgs:
             try:
@@ -220,95 +182,81 @@ class Companion:
                 self.notice(0, "fault", f"ground frame {m.get_type()} dropped: {type(e).__name__}: {e}", t)
 
     def _ground_frame(self, m, t: float, source: Hashable | None) -> None:
+        """One frame from the ground: the radio's report noted, its signature judged, then where the router sends
+        it (``_ROUTES``: one small handler a destination)."""
         if m.get_type() == "BAD_DATA":
             self.counters["bad_frames"] += 1
             return
         header = m.get_header()
-        sender, scomp = header.srcSystem, header.srcComponent
         sysid = self.driver.seen.sysid
-        if sender == 0 or sysid is None or sender == sysid:
+        if header.srcSystem == 0 or sysid is None or header.srcSystem == sysid:
             return  # anonymous, before the autopilot is known, or the vehicle's own frames come back
         if m.get_type() in RADIO_REPORTS:
-            # the telemetry radio's report (any sender: SiK radios are 51/68, and cannot sign, so it counts signed
-            # or not, as ArduPilot accepts it unsigned): its local RSSI is the owner's signal at the robot, for the
-            # link map and the crumbs (never the loss trigger). Then on to the endpoint as before (Dest.KEEP)
-            dbm = rssi_dbm(m)
-            counted = "radio_ignored" if dbm is None else "radio_reports"
-            self.counters[counted] = self.counters.get(counted, 0) + 1
-            if dbm is not None and self.vehicle is not None:
-                self.vehicle.radio_rssi(dbm, t)
+            self._radio_report(m, t)
         raw = bytes(m.get_msgbuf())
         trusted = True
         if self.key is not None:
             self.streams, verdict = self.streams.verify(self.key, raw, self.voice.enc.signing.timestamp)
             trusted = verdict is SigningVerdict.ACCEPT
         if trusted and source is not None:
-            self.sources[sender] = source
+            self.sources[header.srcSystem] = source
+        frame = GroundFrame(m, raw, header.srcSystem, header.srcComponent, header.seq, source, trusted)
         r = router.route(m, sysid)
-        v, ep = self.vehicle, self.endpoint
-        if r.dest in (Dest.COMPANION, Dest.KEEP):
-            if ep is not None:
-                ep.receive(raw, t, source)  # the endpoint judges signatures and hears the owner itself
-            elif r.dest is Dest.COMPANION:
-                self.notice(sender, "starting", "returnlink companion is starting: waiting for the autopilot's "
-                             "position estimate", t)
-            return
-        if trusted and v is not None:
-            v.heard(sender, t, header.seq)
-        if r.dest is Dest.MISDIRECTED:
-            self._refuse(m, Decision(Action.REFUSE, apm.MAV_RESULT_DENIED, f"{router.what(m)} moves the robot: send "
-                                     f"it to the autopilot (component 1), not to the companion (191)"), sender, scomp,
-                         t)
-            return
-        if r.dest is Dest.SIGNING:
-            self.notice(sender, "signing", "signing setup refused: the companion's key is changed by restarting "
-                         "it with --key FILE", t)
-            return
-        if r.dest is not Dest.AUTOPILOT:
-            return
-        d = self._decide(m, r.authority, sender, scomp, t, trusted)
-        if d.kind is Action.FORWARD:
-            self.to_autopilot(raw)
-            self.counters["forwarded"] += 1
-            if r.authority is Authority.MODE:
-                self.mode_from_ground, self.held_drive, self.ground_mode_at = True, False, t
-                self.driver.stop_braking()  # the owner chose the mode: the brake after a return is done
-            elif m.get_type() in SETPOINTS:
-                self.setpoint_at, self.stopped_at = t, None
-                self.driver.stop_braking()  # the owner drives again: its targets, not the brake's
-                if self.held_drive:
-                    self._resume_drive(t)
-            return
-        self._refuse(m, d, sender, scomp, t)
+        if r.dest not in (Dest.COMPANION, Dest.KEEP) and trusted and self.vehicle is not None:
+            self.vehicle.heard(frame.sender, t, frame.seq)  # (the endpoint hears the owner itself)
+        self._ROUTES[r.dest](self, frame, r, t)
 
-    def _decide(self, m, access: Authority, sender: int, scomp: int, t: float, trusted: bool) -> Decision:
-        """The router's decision, with the vehicle asked where the native endpoint asks it (admit, take_manual)."""
-        if access is Authority.READ:
-            return router.FORWARD
-        v = self.vehicle
-        if v is None:
-            return Decision(Action.REFUSE, apm.MAV_RESULT_TEMPORARILY_REJECTED,
-                            "the companion is starting (waiting for the autopilot's position estimate)")
-        if self.autopilot_lost:
-            return Decision(Action.REFUSE, apm.MAV_RESULT_TEMPORARILY_REJECTED,
-                            f"{self.autopilot_name} is not answering")
-        keyed = self.key is not None
-        d = router.decide(access, sender, scomp, v.status().book, t, trusted=trusted, keyed=keyed)
-        if d.kind is Action.ADMIT:
-            v.admit(sender, scomp, t)
-            d = router.decide(access, sender, scomp, v.status().book, t, trusted=trusted, keyed=keyed)
-            if d.kind is Action.ADMIT:  # (cannot happen: the grant was just decided possible)
-                d = Decision(Action.REFUSE, apm.MAV_RESULT_DENIED, "not granted")
-        if d.kind is Action.TAKE:
-            chk = v.take_manual(sender, scomp, t)
-            if chk.executes:
-                return router.FORWARD
-            reason = chk.reason or router.RejectReason.INVALID
-            return Decision(Action.REFUSE, router.REJECT_RESULT[reason],
-                            f"{chk.detail or reason.value}; {router.lease_text(v.status().book)}")
-        if d.kind is Action.REFUSE and self.vehicle is not None:
-            self.vehicle.refused()  # (take_manual counts its own refusals)
-        return d
+    def _radio_report(self, m, t: float) -> None:
+        """The telemetry radio's report (any sender: SiK radios are 51/68, and cannot sign, so it counts signed or
+        not, as ArduPilot accepts it unsigned): its local RSSI is the owner's signal at the robot, for the link map
+        and the crumbs (never the loss trigger). Then on to the endpoint as before (Dest.KEEP)."""
+        dbm = rssi_dbm(m)
+        counted = "radio_ignored" if dbm is None else "radio_reports"
+        self.counters[counted] = self.counters.get(counted, 0) + 1
+        if dbm is not None and self.vehicle is not None:
+            self.vehicle.radio_rssi(dbm, t)
+
+    def _to_endpoint(self, f: GroundFrame, r: Routing, t: float) -> None:
+        """For the companion's own endpoint, which judges signatures and hears the owner itself."""
+        if self.endpoint is not None:
+            self.endpoint.receive(f.raw, t, f.source)
+        elif r.dest is Dest.COMPANION:
+            self.notice(f.sender, "starting", "returnlink companion is starting: waiting for the autopilot's "
+                        "position estimate", t)
+
+    def _misdirected(self, f: GroundFrame, r: Routing, t: float) -> None:
+        self._refuse(f.m, Decision(Action.REFUSE, apm.MAV_RESULT_DENIED, f"{router.what(f.m)} moves the robot: send "
+                                   f"it to the autopilot (component 1), not to the companion (191)"), f.sender,
+                     f.scomp, t)
+
+    def _signing(self, f: GroundFrame, r: Routing, t: float) -> None:
+        self.notice(f.sender, "signing", "signing setup refused: the companion's key is changed by restarting "
+                    "it with --key FILE", t)
+
+    def _elsewhere(self, f: GroundFrame, r: Routing, t: float) -> None:
+        """Addressed to another system or component: dropped."""
+
+    def _to_autopilot(self, f: GroundFrame, r: Routing, t: float) -> None:
+        """For the autopilot: forwarded if the sender may (``gate.decide``), else refused and answered. The owner's mode
+        change or setpoint reaching the autopilot ends the brake after a return and tells the drive watch."""
+        down = f"{self.autopilot_name} is not answering" if self.autopilot_lost else None
+        d = gate.decide(self.vehicle, r.authority, f.sender, f.scomp, t, trusted=f.trusted, keyed=self.key is not None,
+                        autopilot_down=down)
+        if d.kind is not Action.FORWARD:
+            self._refuse(f.m, d, f.sender, f.scomp, t)
+            return
+        self.to_autopilot(f.raw)
+        self.counters["forwarded"] += 1
+        if r.authority is Authority.MODE:
+            self.mode_from_ground = True
+            self.drive.mode_changed(t)
+            self.driver.stop_braking()  # the owner chose the mode: the brake after a return is done
+        elif f.m.get_type() in SETPOINTS:
+            self.driver.stop_braking()  # the owner drives again: its targets, not the brake's
+            self.drive.setpoint(t)
+
+    _ROUTES = {Dest.COMPANION: _to_endpoint, Dest.KEEP: _to_endpoint, Dest.MISDIRECTED: _misdirected,
+               Dest.SIGNING: _signing, Dest.AUTOPILOT: _to_autopilot, Dest.ELSEWHERE: _elsewhere}
 
     def _refuse(self, m, d: Decision, sender: int, scomp: int, t: float) -> None:
         self.counters["refused"] += 1
@@ -404,79 +352,12 @@ class Companion:
             d.engage(t)
         elif not returning and d.engaged:
             d.release(t, hold=not (self.mode_from_ground or self.preempted))
-        rhythm = self._rhythm(book.link.last_heard, book.link.delivery.newest, v.params["LNK_TIMEOUT"])
-        if not returning:
-            self._dead_man(t, rhythm, book)
-        self._watch_held(t, book, returning)
+        said = self.drive.tick(t, book, returning, v.params["LNK_HOLD_S"], v.params["LNK_TIMEOUT"],
+                               self.autopilot_lost)
+        if said is not None:
+            self.counters["drive_held"] += 1
+            self.notice(0, "dead-man", said, t)
         return True
-
-    def _watch_held(self, t: float, book: LeaseBook, returning: bool) -> None:
-        """PX4: note when the owner's Offboard drive went to Hold without anyone on the ground asking (PX4's
-        Offboard loss: the owner's stream silent for COM_OF_LOSS_T), so that its next setpoint resumes it
-        (``_resume_drive``); forget it once the rover is in any other mode or a return holds the lease."""
-        d = self.driver
-        mode, rules = d.seen.mode, d.rules
-        cur = book.current
-        if (rules.stop_holds and not returning and self.last_mode == rules.drive and mode == rules.hold
-                and cur is not None and cur.holder is Holder.OPERATOR and cur.claimed and self.setpoint_at is not None
-                and t - self.setpoint_at <= STREAM_S
-                and (self.ground_mode_at is None or t - self.ground_mode_at > STREAM_S)):
-            self.held_drive = True
-        if returning or mode not in (rules.drive, rules.hold):
-            self.held_drive = False
-        self.last_mode = mode
-
-    def _resume_drive(self, t: float) -> None:
-        """The owner's setpoint arrived (forwarded: it holds the current lease) while its Offboard drive stands
-        in a Hold it did not ask for: Offboard again, as ArduPilot drives again on the owner's next target after
-        the dead-man's stop. The companion knows whose lease is current; the owner's station, a radio hop away,
-        may not (a mode change from it over a return that began meanwhile would take the lease from the return)."""
-        d = self.driver
-        if d.seen.mode == d.rules.hold and not d.engaged:
-            self.held_drive = False
-            d.resume(t)
-
-    def _dead_man(self, t: float, rhythm: float, book: LeaseBook) -> None:
-        """Stop the autopilot's drive once the owner driving it with setpoints has fallen silent (``drive_held``):
-        a zero-velocity target, repeated every STOP_RESEND s while the silence lasts. The owner's next setpoint
-        drives again; a return that follows finds the autopilot in GUIDED and standing (PX4: in Hold, which the
-        return leaves for Offboard once its own stream runs; ``AutopilotDriver.stop``)."""
-        v, d = self.vehicle, self.driver
-        assert v is not None
-        heard = book.link.last_heard
-        cur = book.current
-        if (cur is None or cur.holder is not Holder.OPERATOR or not d.armed or self.autopilot_lost
-                or not drive_held(t, self.setpoint_at, heard, v.params["LNK_HOLD_S"], rhythm)):
-            return
-        if self.stopped_at is not None and t - self.stopped_at < STOP_RESEND:
-            return
-        if d.stop(t):
-            self.held_drive = self.held_drive or d.rules.stop_holds  # (PX4: the owner's next setpoint resumes)
-            if self.stopped_at is None:
-                self.counters["drive_held"] += 1
-                self.notice(0, "dead-man", f"owner silent {t - (heard or t):.1f} s: the autopilot's drive "
-                                           f"stopped (LNK_HOLD_S)", t)
-            self.stopped_at = t
-
-    def _rhythm(self, heard: float | None, seq: int | None, timeout: float) -> float:
-        """The owner's own longest spacing between packets over the RHYTHM_S before its last one (0: none
-        known): each gap between two packets heard, divided by the packets it sent in it (their MAVLink sequence
-        numbers, ``seq`` the newest heard; 1 where they are not measured). A hole the radio made is not the
-        owner's rhythm: the packets it swallowed were sent, and counting the hole let the autopilot drive on to a
-        stale target at the fringe (issue 28, the open field: 6-12 m deeper before the loss, a longer way back). A
-        gap of LNK_TIMEOUT or more was a loss, not a rhythm at all."""
-        if heard is None:
-            return 0.0
-        gaps = self.gaps
-        if heard != self.heard_at:
-            if self.heard_at is not None and heard - self.heard_at < timeout:
-                sent = 1 if seq is None or self.heard_seq is None else seq - self.heard_seq
-                if sent > 0:
-                    gaps.append((heard, (heard - self.heard_at) / sent))
-            self.heard_at, self.heard_seq = heard, seq
-            while gaps and gaps[0][0] < heard - RHYTHM_S:
-                gaps.popleft()
-        return max((g for _, g in gaps), default=0.0)
 
     def _watch_autopilot(self, t: float) -> None:
         """The autopilot silent for LOST_AFTER: said to the ground, and whatever lease was current ends (nothing

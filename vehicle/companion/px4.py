@@ -1,6 +1,7 @@
 """What differs when the autopilot beside the companion is PX4 (docs/architecture.md §11.2): its modes, how a return
-drives it in Offboard, its parameters' wire encoding. ``vehicle.companion.autopilot`` picks this or the ArduPilot
-rules from the autopilot's HEARTBEAT (``autopilot`` 12 here, 3 there) and drives both through one driver.
+drives it in Offboard, its parameters' wire encoding. ``vehicle.companion.rules`` picks this or the ArduPilot
+rules from the autopilot's HEARTBEAT (``autopilot`` 12 here, 3 there); ``vehicle.companion.autopilot`` drives both
+through one driver.
 
 What PX4's differential rover (``rover_differential``, airframe 1069 and the r1-rover tuning it shares) accepts in
 Offboard, read from its source (``src/modules/mavlink/mavlink_receiver.cpp``,

@@ -10,6 +10,7 @@ voice signs on link id 1, a stream of its own, so the two never trip each other'
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as apm
@@ -62,3 +63,23 @@ class GroundVoice:
         self.seqs[(sysid, compid)] = (seq + 1) % 256
         enc.srcSystem, enc.srcComponent, enc.seq = sysid, compid, seq
         return bytes(msg.pack(enc))
+
+
+class RangeRelay:
+    """Range data to the ground at most once every ``gap`` s per sensor: the return asks for it at 10 Hz, six
+    rangefinders are 60 messages a second, and a telemetry radio has better uses for its air time."""
+
+    def __init__(self, gap: float) -> None:
+        self.gap = gap
+        self.relayed: dict[tuple, float] = {}  # (sysid, compid, message, sensor) -> when last relayed
+
+    def passes(self, m, t: float) -> bool:
+        """Whether this range message goes on to the ground: a sensor's first in ``gap``."""
+        key = (m.get_srcSystem(), m.get_srcComponent(), m.get_type(), getattr(m, "id", 0),
+               getattr(m, "orientation", 0))
+        if t - self.relayed.get(key, -math.inf) < self.gap:
+            return False
+        if len(self.relayed) >= 1024:  # (a vehicle has a few dozen sensors: anything more is noise)
+            self.relayed.clear()
+        self.relayed[key] = t
+        return True
