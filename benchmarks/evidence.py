@@ -29,6 +29,9 @@ trial's own value (``sim.campaign.store.percentile``, as in every sweep table):
   mean rest from the loss, contacts in returns.
 - ``compare``: per scenario (``rows=``) and policy (``policies=``, in that order, on whichever robot flew it), pass
   rate, trials regained by the return, time to link p50 / P95, mean rest from the loss, contacts in returns.
+- ``drive``: per scenario (``rows=``) and policy (``policies=``), on whichever robot flew it: trials, contacts in
+  returns, collisions in all (the operator's drive included), link losses per trial (mean), time to link P95 and its
+  ratio to the first policy's on the same scenario (issue 41: is the comparison of the returns, not of the drivers).
 - ``spread``: time to link under a one-tick perturbation (issue 38). The sweep swept one parameter (``param=``,
   default LNK_TIMEOUT) over two values one tick apart; each trial (scenario, robot, seed, policy) is paired with its
   twin and the gap between their times to link is the spread. Per robot: pairs, mean / P95 / largest gap, pairs more
@@ -223,6 +226,26 @@ def compare_table(rows: list[dict], order: list[str] | None, policies: list[str]
     return "\n".join(lines)
 
 
+def drive_table(rows: list[dict], order: list[str] | None, policies: list[str]) -> str:
+    """Per scenario and policy: the drive's figures beside the return's (``drive`` in the module docstring)."""
+    lines = ["| scenario | robot | policy | trials | contacts in returns | collisions in all | link losses per trial | "
+             "P95 time to link | P95 against the first |", "|---|---|---|---|---|---|---|---|---|"]
+    ran = finished(rows)
+    for sc in _order({r["scenario"] for r in ran}, order):
+        first: float | None = None
+        for pol in _order({r["policy"] for r in _pick(ran, scenario=sc)}, policies):
+            rs = _pick(ran, scenario=sc, policy=pol)
+            p95 = p(ttl_values(rs), 95)
+            first = p95 if first is None else first
+            ratio = "-" if p95 is None or not first or math.isinf(p95) or math.isinf(first) else f"{p95 / first:.2f}x"
+            losses = mean([float(r.get("link_cycles") or 0) for r in rs])
+            robots = ", ".join(sorted({r["vehicle"] for r in rs}))
+            lines.append(f"| {sc} | {robots} | {pol} | {len(rs)} | {contacts(rs)} | "
+                         f"{sum(int(r.get('collisions') or 0) for r in rs)} | {losses:.2f} | "
+                         f"{seconds(p95, 2)}{'' if p95 is None or math.isinf(p95) else ' s'} | {ratio} |")
+    return "\n".join(lines)
+
+
 def perturbation_gaps(rows: list[dict], param: str) -> dict[str, list[float]]:
     """Per robot, the gap in time to link between each trial and its twin one parameter value away (both finished,
     both regained; a trial whose twin never regained is a gap of inf)."""
@@ -290,11 +313,13 @@ def table_for(opts: dict[str, str], sweeps: Callable[[str], list[dict]]) -> str:
         return seek_table(rows, _list(opts, "split") or [])
     if kind == "compare":
         return compare_table(rows, _list(opts, "rows"), _list(opts, "policies") or list(BASELINES))
+    if kind == "drive":
+        return drive_table(rows, _list(opts, "rows"), _list(opts, "policies") or list(BASELINES))
     if kind == "spread":
         before = sweeps(opts["before"]) if "before" in opts else None
         return spread_table(rows, opts.get("param", "LNK_TIMEOUT"), before,
                             (f"`{opts.get('before_tree', '?')}` (before)", f"`{opts.get('tree', '?')}`"))
-    raise ValueError(f"table={kind!r}: family, builtin, seek, compare or spread")
+    raise ValueError(f"table={kind!r}: family, builtin, seek, compare, drive or spread")
 
 
 def provenance(opts: dict[str, str], counts: Callable[[str], tuple[int, int]]) -> str:

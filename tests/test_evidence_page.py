@@ -53,7 +53,7 @@ def test_every_section_of_the_page_names_a_table_and_its_sweep_spec_and_tree():
     assert not by_hand, f"docs/evidence.md has table lines outside a written section: lines {by_hand}"
     for k in begins:
         opts = ev.parse_marker(ev.BEGIN.match(lines[k]).group(1))
-        assert opts["table"] in ("family", "builtin", "seek", "compare", "spread") and opts["sweep"], lines[k]
+        assert opts["table"] in ("family", "builtin", "seek", "compare", "drive", "spread") and opts["sweep"], lines[k]
         assert all((ROOT / spec).is_file() for spec in opts["spec"].split(",")), lines[k]
         assert re.fullmatch(r"[0-9a-f]{7,40}", opts["tree"]), lines[k]
         end = lines.index(ev.END, k)
@@ -111,3 +111,14 @@ def test_the_spread_pairs_each_trial_with_its_twin_one_tick_away():
     table = ev.spread_table(after, "LNK_TIMEOUT", before, ("old", "new")).splitlines()
     assert table[2].startswith("| old | rover | 2 |") and table[2].endswith("| never | 2 |"), table[2]
     assert table[3] == "| new | rover | 2 | 0.25 s | 0.50 s | 0.50 s | 0 |", table[3]
+
+
+def test_the_drive_table_puts_the_drivers_figures_beside_the_returns():
+    """Issue 41: contacts in returns, collisions in all and link losses per trial per policy, and each P95 against the
+    first policy's on the same scenario."""
+    ev = _module()
+    rows = [dict(_row(s, "rover", "returnlink", 5.0 + s), collisions=1 if s == 1 else 0) for s in range(1, 3)]
+    rows += [dict(_row(s, "ardurover", "companion", 6.0 + s, contacts=s - 1), link_cycles=2) for s in range(1, 3)]
+    table = ev.drive_table(rows, None, ["returnlink", "companion"]).splitlines()
+    assert table[2] == "| tunnel | rover | returnlink | 2 | 0 | 1 | 1.00 | 7.00 s | 1.00x |", table[2]
+    assert table[3] == "| tunnel | ardurover | companion | 2 | 1 | 0 | 2.00 | 8.00 s | 1.14x |", table[3]
