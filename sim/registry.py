@@ -63,14 +63,18 @@ class Policy:
     """A link-loss policy (docs/architecture.md §9-§11). ``what`` completes "policy X is ..." where a vehicle
     cannot fly it; ``need`` completes "policy X ..." on the command line (empty: "needs" the vehicle's program);
     ``fs_action`` is ArduPilot's FS_ACTION for a policy flown on that firmware (its GCS failsafe, or the backstop
-    behind returnlink beside or aboard it); ``beside``: returnlink runs as a companion beside the autopilot, whose
-    parameters must then pass the companion's own check and whose rover carries rangefinders for it; ``aboard``:
-    returnlink runs inside the autopilot itself (the Lua applet)."""
+    behind returnlink beside or aboard it); ``nav_dll_act`` and ``com_obl_rc_act`` are PX4's data-link and
+    Offboard-loss actions for a policy that is PX4's own failsafe (Hold 1 / 5, Return 2 / 3); ``beside``:
+    returnlink runs as a companion beside the autopilot, whose parameters must then pass the companion's own check
+    and whose rover carries rangefinders for it; ``aboard``: returnlink runs inside the autopilot itself (the Lua
+    applet)."""
 
     name: str
     what: str = ""
     need: str = ""
     fs_action: int | None = None
+    nav_dll_act: int | None = None
+    com_obl_rc_act: int | None = None
     beside: bool = False
     aboard: bool = False
 
@@ -111,7 +115,8 @@ POLICIES: tuple[Policy, ...] = (
     # returnlink's Lua applet aboard the ArduPilot firmware (§11.3): no returnlink process, the GCS failsafe its
     # backstop
     Policy("applet", "returnlink's Lua applet aboard the ArduPilot firmware", fs_action=2, aboard=True),
-    Policy("px4-hold", _PX4_FAILSAFE), Policy("px4-return", _PX4_FAILSAFE),
+    Policy("px4-hold", _PX4_FAILSAFE, nav_dll_act=1, com_obl_rc_act=5),
+    Policy("px4-return", _PX4_FAILSAFE, nav_dll_act=2, com_obl_rc_act=3),
 )
 BY_POLICY: dict[str, Policy] = {p.name: p for p in POLICIES}
 POLICY_NAMES: tuple[str, ...] = tuple(BY_POLICY)

@@ -38,8 +38,10 @@ from sim.px4.lockstep import HOLD, NAV_STATES, OFFBOARD, RETURN, PX4Lockstep, na
 from sim.px4.operator import RETURN_MODES, PX4Operator
 from sim.scenario import Scenario, Station
 
-NAV_DLL_ACT = {"px4-hold": 1, "px4-return": 2}  # PX4's data-link loss action per policy: Hold, Return
-COM_OBL_RC_ACT = {"px4-hold": 5, "px4-return": 3}  # its Offboard-loss action: the same Hold (5) or Return (3)
+# PX4's data-link loss action per policy (Hold 1, Return 2) and its Offboard-loss action (the same Hold 5 or
+# Return 3), from the registry
+NAV_DLL_ACT = {p.name: p.nav_dll_act for p in registry.POLICIES if p.nav_dll_act is not None}
+COM_OBL_RC_ACT = {p.name: p.com_obl_rc_act for p in registry.POLICIES if p.com_obl_rc_act is not None}
 COM_OF_LOSS_T_MAX = 60.0  # s: the top of COM_OF_LOSS_T's range
 
 
