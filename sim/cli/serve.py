@@ -69,8 +69,8 @@ def command(args: argparse.Namespace) -> int:
     if args.vehicle in AUTOPILOT_VEHICLES:
         return serve_autopilot.command(args, sc, args.vehicle)
     if args.policy or args.firmware:
-        raise fail("--policy and --firmware go with --vehicle ardurover or px4rover (the native vehicle flies its "
-                   "own plan)")
+        raise fail(f"--policy and --firmware go with --vehicle {' or '.join(AUTOPILOT_VEHICLES)} (the native vehicle "
+                   "flies its own plan)")
     params = parm_file(args.params)
     if args.out:
         writable_dir(Path(args.out))  # the plot is written on exit: know now that it can be
