@@ -18,6 +18,7 @@ import numpy as np
 
 from link.storage import StoredFileError
 from sim.campaign.store import percentile, read_rows, rest_from_loss, time_to_link
+from sim.registry import DEFAULT_POLICY
 
 REST_RATIO = 0.25  # returnlink's mean rest distance at most this share of SmartRTL's
 WEAK_CYCLES_MEAN, WEAK_CYCLES_MAX, WEAK_REGAINED = 1.5, 3, 0.99
@@ -75,7 +76,7 @@ def weak_table(rows: list[dict]) -> tuple[str, int]:
         share = by_return / len(lost) if lost else float("nan")
         mean = float(np.mean(cycles)) if cycles else float("nan")
         top = max(cycles) if cycles else 0
-        if pol == "returnlink":
+        if pol == DEFAULT_POLICY:  # the scenario's own plan: the one these thresholds judge
             misses += (mean > WEAK_CYCLES_MEAN) + (top > WEAK_CYCLES_MAX) + (share < WEAK_REGAINED)
         ttl = _p95([x for r in ran if (x := time_to_link(r)) is not None])
         lines.append(f"| {veh} | {pol} | {len(rs)} | {mean:.2f} | {top} | {by_return}/{len(lost)} ({share:.0%}) | "

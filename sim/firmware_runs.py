@@ -14,7 +14,7 @@ from pathlib import Path
 
 from sim.plants.companion import CompanionPlant
 from sim.plants.firmware import FirmwarePlant
-from sim.policies import COMPANION_POLICY, DEFAULT_FIRMWARE_POLICY, FIRMWARE_VEHICLE
+from sim.registry import default_policy
 from sim.runner import Run
 from sim.scenario import Scenario
 
@@ -25,10 +25,10 @@ class FirmwareRun(Run):
 
     plant_type: type = FirmwarePlant
 
-    def __init__(self, scenario: Scenario, seed: int | None = None, policy: str = DEFAULT_FIRMWARE_POLICY,
+    def __init__(self, scenario: Scenario, seed: int | None = None, policy: str = default_policy(FirmwarePlant.kind),
                  firmware: Path | None = None, progress: bool = False, duration: float | None = None,
                  log_path: Path | None = None) -> None:
-        super().__init__(scenario, FIRMWARE_VEHICLE, seed, progress, duration, policy, plant=self.plant_type,
+        super().__init__(scenario, self.plant_type.kind, seed, progress, duration, policy, plant=self.plant_type,
                          firmware=firmware, log_path=log_path)
 
     @property
@@ -54,7 +54,7 @@ class CompanionRun(FirmwareRun):
 
     plant_type = CompanionPlant
 
-    def __init__(self, scenario: Scenario, seed: int | None = None, policy: str = COMPANION_POLICY,
+    def __init__(self, scenario: Scenario, seed: int | None = None, policy: str = CompanionPlant.policies[0],
                  firmware: Path | None = None, progress: bool = False, duration: float | None = None,
                  log_path: Path | None = None) -> None:
         super().__init__(scenario, seed, policy, firmware, progress, duration, log_path)

@@ -271,9 +271,12 @@ class Legged(Robot):
         return self.speed * (1.0 + self.slip) + self.spec.leg_odo_noise * self.normal()
 
 
+# the robot bodies by the vehicle kind that drives them (the plant registry's native vehicles, sim.registry)
+ROBOTS: dict[str, type[Robot]] = {cls.kind: cls for cls in (Rover, Legged)}
+
+
 def make_robot(kind: str, world: World, x: float, y: float, yaw: float, rng: np.random.Generator) -> Robot:
-    if kind == "rover":
-        return Rover(world, x, y, yaw, rng)
-    if kind == "legged":
-        return Legged(world, x, y, yaw, rng)
-    raise ValueError(f"unknown vehicle {kind!r} (rover or legged)")
+    """The pymunk body of a ``kind`` of robot (every plant drives one: the autopilots a rover)."""
+    if kind not in ROBOTS:
+        raise ValueError(f"unknown vehicle {kind!r} ({' or '.join(ROBOTS)})")
+    return ROBOTS[kind](world, x, y, yaw, rng)

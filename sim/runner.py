@@ -34,8 +34,9 @@ from link.transports import LockstepBus
 from sim.jams import Jams, radio_event
 from sim.lease_record import LeaseRecord
 from sim.plants import Plant
-from sim.plants.native import TICK_RATE, NativePlant
-from sim.policies import APPLET_POLICY, COMPANION_POLICY, DEFAULT_POLICY, FIRMWARE_VEHICLE, PX4_VEHICLE
+from sim.plants import registry as plants_registry
+from sim.plants.native import TICK_RATE
+from sim.registry import DEFAULT_POLICY
 from sim.scenario import Scenario
 from vehicle.core import DT
 from vehicle.lease import Holder
@@ -90,29 +91,9 @@ def frozen() -> Iterator[None]:
 
 
 def plant_for(vehicle: str, policy: str) -> type:
-    """The plant that flies ``policy`` on ``vehicle``: the ArduPilot firmware's own failsafes, returnlink companion
-    beside it, PX4's own failsafe, or returnlink's own vehicle (each refuses a policy it cannot fly, saying why)."""
-    if vehicle == PX4_VEHICLE:
-        if policy == COMPANION_POLICY:
-            from sim.plants.px4_companion import PX4CompanionPlant
-
-            return PX4CompanionPlant
-        from sim.plants.px4 import PX4Plant
-
-        return PX4Plant
-    if vehicle != FIRMWARE_VEHICLE:
-        return NativePlant
-    if policy == COMPANION_POLICY:
-        from sim.plants.companion import CompanionPlant
-
-        return CompanionPlant
-    if policy == APPLET_POLICY:
-        from sim.plants.applet import AppletPlant
-
-        return AppletPlant
-    from sim.plants.firmware import FirmwarePlant
-
-    return FirmwarePlant
+    """The plant that flies ``policy`` on ``vehicle``, from the plant registry (``sim.plants.registry``; each
+    plant refuses a policy it cannot fly, saying why)."""
+    return plants_registry.plant_for(vehicle, policy)
 
 
 def _column(name: str) -> property:

@@ -33,6 +33,7 @@ from link.plan_items import (
 from link.radio import RadioParams
 from sim.maps import mapfile
 from sim.maps.grid import DEFAULT_WALL_DB, DEFAULT_WALL_DB_PER_M, UNKNOWN, Site
+from sim.registry import NATIVE_VEHICLES
 from sim.scenario_fields import Reader, ScenarioError
 from sim.world import Station, Wall, World
 from vehicle.lease import ExpireReason
@@ -272,8 +273,8 @@ def _header_line(r: Reader, table: str) -> int | None:
 def _vehicle_and_seed(r: Reader, raw: dict) -> tuple[str, int]:
     """The robot and the seed a scenario (drawn or generated) flies with, range-checked."""
     vehicle = r.get(raw, "vehicle", "vehicle", str, "rover")
-    if vehicle not in ("rover", "legged"):
-        raise r.fail("vehicle", f"must be rover or legged, got {vehicle!r}")
+    if vehicle not in NATIVE_VEHICLES:  # a scenario's own robot: an autopilot is asked for by --vehicle
+        raise r.fail("vehicle", f"must be {' or '.join(NATIVE_VEHICLES)}, got {vehicle!r}")
     seed = r.get(raw, "seed", "seed", int, 1)
     if not 0 <= seed <= SEED_MAX:
         raise r.fail("seed", f"must be within 0..{SEED_MAX}, got {seed}")

@@ -31,8 +31,9 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from sim import registry
 from sim.campaign.trial import RADIO_AXES, RADIO_PREFIX, Trial
-from sim.policies import DEFAULT_POLICY, POLICY_NAMES, flies, vehicle_for
+from sim.registry import DEFAULT_POLICY, POLICY_NAMES, VEHICLES, flies
 from sim.scenario import BUILTIN, ScenarioError
 from sim.worlds.resolve import PREFIX, generator_text, parse, world_text
 from vehicle.params import BY_NAME, ParamError, validate
@@ -42,8 +43,6 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-# ardurover: the real ArduPilot firmware (docs/architecture.md §10); px4rover: the real PX4 (§10.1)
-VEHICLES = ("rover", "legged", "ardurover", "px4rover")
 FIELDS = ("scenarios", "vehicles", "seeds", "params", "radio", "policies", "timeout_s")
 MAX_TRIALS = 1_000_000  # a typo such as seeds = {from = 1, to = 1e9} is refused before it fills a disk
 DEFAULT_TIMEOUT_S = 600.0
@@ -281,10 +280,7 @@ def _check_pairing(r: _Lines, policies: list[str], listed: list[str], vehicles: 
     ``vehicles`` no listed policy suits."""
     for k, p in enumerate(policies):
         if not any(flies(p, veh) for veh in listed):
-            need = f"vehicle {vehicle_for(p)!r}" if vehicle_for(p) else "a native vehicle (rover, legged)"
-            if p == "companion":
-                need = "vehicle 'ardurover' or 'px4rover'"
-            raise r.fail(f"policies[{k}]", f"policy {p!r} needs {need} in vehicles")
+            raise r.fail(f"policies[{k}]", f"policy {p!r} needs {registry.spec_need(p)} in vehicles")
     for k, veh in enumerate(vehicles):
         if not any(flies(p, veh) for p in policies):
             raise r.fail(f"vehicles[{k}]", f"no listed policy can be flown by vehicle {veh!r}")

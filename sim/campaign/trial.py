@@ -13,7 +13,8 @@ import json
 import time
 from dataclasses import dataclass, field, replace
 
-from sim.policies import DEFAULT_POLICY, FIRMWARE_VEHICLE, PX4_VEHICLE
+from sim import registry
+from sim.registry import DEFAULT_POLICY
 
 
 @dataclass(frozen=True)
@@ -91,15 +92,8 @@ def simulate(trial: Trial, progress: bool = False):
     from sim import outputs
     from sim.runner import Run
 
-    options = {}
-    if trial.vehicle == FIRMWARE_VEHICLE:
-        from sim.firmware.locate import find_firmware
-
-        options["firmware"] = find_firmware(trial.firmware or None)
-    elif trial.vehicle == PX4_VEHICLE:
-        from sim.px4.locate import find_px4
-
-        options["px4"] = find_px4(trial.firmware or None)
+    outside = registry.outside(trial.vehicle)  # the autopilot the vehicle needs, where this machine keeps it
+    options = {} if outside is registry.Outside.NONE else {outside.option: outside.locate(trial.firmware or None)}
     run = Run(scenario_of(trial), trial.vehicle, trial.seed, progress=progress, policy=trial.policy,
               **options).run()
     run.metrics = outputs.compute(run)

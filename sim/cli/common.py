@@ -86,40 +86,14 @@ def parm_file(path: str | None) -> Path | None:
 
 
 def policy_for(args: argparse.Namespace, kind: str) -> str:
-    """--policy, or the default for the vehicle; a policy the vehicle cannot fly exits 2."""
-    from sim.policies import (
-        DEFAULT_FIRMWARE_POLICY,
-        DEFAULT_POLICY,
-        DEFAULT_PX4_POLICY,
-        FIRMWARE_VEHICLE,
-        PX4_VEHICLE,
-        flies,
-    )
+    """--policy, or the default for the vehicle; a policy the vehicle cannot fly exits 2 saying why (both from the
+    plant registry, ``sim.registry``)."""
+    from sim import registry
 
-    default = {FIRMWARE_VEHICLE: DEFAULT_FIRMWARE_POLICY, PX4_VEHICLE: DEFAULT_PX4_POLICY}.get(kind, DEFAULT_POLICY)
-    policy = args.policy or default
-    if not flies(policy, kind):
-        raise fail(_why_not(policy, kind))
+    policy = args.policy or registry.default_policy(kind)
+    if not registry.flies(policy, kind):
+        raise fail(registry.why_not(policy, kind))
     return policy
-
-
-def _why_not(policy: str, kind: str) -> str:
-    """Why vehicle ``kind`` cannot fly ``policy``: an autopilot names what it flies, a native vehicle names the
-    vehicle the policy needs."""
-    from sim.policies import COMPANION_POLICY, FIRMWARE_VEHICLE, PX4_FAILSAFE_POLICIES, PX4_VEHICLE, vehicle_for
-
-    autopilot_flies = {
-        FIRMWARE_VEHICLE: "the ArduPilot firmware's own failsafes, returnlink beside it or the Lua applet in it: "
-                          "--policy ardupilot-hold, ardupilot-rtl, ardupilot-smartrtl, companion or applet",
-        PX4_VEHICLE: f"PX4's own data-link failsafe or returnlink beside it: --policy "
-                     f"{' or '.join(PX4_FAILSAFE_POLICIES)} or companion",
-    }
-    if kind in autopilot_flies:
-        return f"vehicle {kind} flies {autopilot_flies[kind]} (got {policy})"
-    if policy == COMPANION_POLICY:
-        return f"policy {policy} runs beside a real autopilot: use --vehicle {FIRMWARE_VEHICLE} or {PX4_VEHICLE}"
-    need = "the ArduPilot firmware" if vehicle_for(policy) == FIRMWARE_VEHICLE else "PX4"
-    return f"policy {policy} needs {need}: use --vehicle {vehicle_for(policy)}"
 
 
 def px4_dir(option: str | None) -> Path:
@@ -140,6 +114,20 @@ def firmware_binary(option: str | None) -> Path:
         return find_firmware(option)
     except FirmwareNotFound as e:
         raise fail(str(e)) from None
+
+
+def autopilot_path(args: argparse.Namespace, vehicle: str) -> Path | None:
+    """Where this machine keeps the outside program ``vehicle`` needs (the plant registry says which: the ArduPilot
+    firmware from --firmware, PX4 from --px4, or their defaults), None for a vehicle with returnlink aboard; not
+    found: exit 2 saying so."""
+    from sim.registry import Outside, outside
+
+    program = outside(vehicle)
+    if program is Outside.ARDUPILOT:
+        return firmware_binary(args.firmware)
+    if program is Outside.PX4:
+        return px4_dir(args.px4)
+    return None
 
 
 def px4_unusable(px4: Path, e: Exception) -> SystemExit:

@@ -7,7 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from sim.cli.common import Refusal, firmware_binary, print_wrote, px4_dir, usage_error
+from sim.cli.common import Refusal, autopilot_path, print_wrote, usage_error
 
 # the trial's inputs, which the comparison of its outcome leaves aside
 _INPUTS = ("scenario", "vehicle", "seed", "policy")
@@ -68,12 +68,8 @@ def _with_autopilot(trial, args: argparse.Namespace):
     row does not say where another machine kept its binary."""
     from dataclasses import replace
 
-    from sim.policies import FIRMWARE_VEHICLE, PX4_VEHICLE
-
-    locate = {FIRMWARE_VEHICLE: lambda: firmware_binary(args.firmware), PX4_VEHICLE: lambda: px4_dir(args.px4)}
-    if trial.vehicle not in locate:
-        return trial
-    return replace(trial, firmware=str(locate[trial.vehicle]()))
+    binary = autopilot_path(args, trial.vehicle)
+    return trial if binary is None else replace(trial, firmware=str(binary))
 
 
 def _compared(row: dict, m: dict, within) -> int:

@@ -14,11 +14,10 @@ from sim.cli.common import (
     add_firmware_option,
     add_map_options,
     add_px4_option,
+    autopilot_path,
     fail,
-    firmware_binary,
     policy_for,
     print_wrote,
-    px4_dir,
     px4_unusable,
     scenario,
     usage_error,
@@ -27,14 +26,14 @@ from sim.cli.common import (
 
 
 def add_parser(sim) -> None:
-    from sim.policies import DEFAULT_POLICY, POLICY_NAMES
+    from sim.registry import DEFAULT_POLICY, POLICY_NAMES, VEHICLES
 
     run = sim.add_parser("run", help="run a scenario in lockstep, as fast as possible")
     run.add_argument("scenario", nargs="?", help="a built-in scenario name, gen:KIND (a world generated from the "
                                                 "seed: gen:office, gen:mine, gen:culvert), map:PATH.yaml (a world "
                                                 "made from a ROS map_server map, with --station) or a .toml file")
     run.add_argument("--seed", type=types.SEED, help="random seed (default: the scenario's)")
-    run.add_argument("--vehicle", choices=["rover", "legged", "ardurover", "px4rover"],
+    run.add_argument("--vehicle", choices=VEHICLES,
                      help="robot model (default: the scenario's); ardurover: the scenario's rover driven by the real "
                           "ArduPilot firmware; px4rover: driven by the real PX4")
     run.add_argument("--out", help="output directory (default: out/SCENARIO-VEHICLE-SEED)")
@@ -140,15 +139,12 @@ def command(args: argparse.Namespace) -> int:
 def _autopilot(args: argparse.Namespace, kind: str) -> tuple[Path, bool] | None:
     """The real autopilot a ``kind`` of vehicle runs (its binary or directory, and whether it is PX4), or None for
     a vehicle with returnlink aboard; --px4 with any other vehicle, or an autopilot not found: exit 2."""
-    from sim.policies import FIRMWARE_VEHICLE, PX4_VEHICLE
+    from sim.registry import Outside, needing, outside
 
-    if args.px4 and kind != PX4_VEHICLE:
-        raise fail(f"--px4 goes with --vehicle {PX4_VEHICLE} (got vehicle {kind})")
-    if kind == FIRMWARE_VEHICLE:
-        return firmware_binary(args.firmware), False
-    if kind == PX4_VEHICLE:
-        return px4_dir(args.px4), True
-    return None
+    if args.px4 and outside(kind) is not Outside.PX4:
+        raise fail(f"--px4 goes with --vehicle {' or '.join(needing(Outside.PX4))} (got vehicle {kind})")
+    binary = autopilot_path(args, kind)
+    return None if binary is None else (binary, outside(kind) is Outside.PX4)
 
 
 def _run_autopilot(args: argparse.Namespace, sc, kind: str, seed: int, policy: str, out: Path, binary: Path,

@@ -26,15 +26,14 @@ from sim.cli.common import (
 
 
 def add_parser(sim) -> None:
-    from sim.policies import APPLET_POLICY, COMPANION_POLICY, FAILSAFE_POLICIES, PX4_FAILSAFE_POLICIES
+    from sim.registry import VEHICLES, autopilot_policies
 
     serve = sim.add_parser("serve", help="run a scenario in real time over UDP for MAVSDK, MAVProxy, QGC")
     serve.add_argument("scenario", help="a built-in scenario name, gen:KIND (drawn from --seed) or a .toml file")
-    serve.add_argument("--vehicle", choices=["rover", "legged", "ardurover", "px4rover"],
+    serve.add_argument("--vehicle", choices=VEHICLES,
                        help="robot model (default: the scenario's); ardurover: the real ArduPilot firmware; "
                             "px4rover: the real PX4 rover")
-    serve.add_argument("--policy", choices=(*FAILSAFE_POLICIES, COMPANION_POLICY, APPLET_POLICY,
-                                            *PX4_FAILSAFE_POLICIES),
+    serve.add_argument("--policy", choices=autopilot_policies(),
                        help="with --vehicle ardurover: its GCS failsafe (default ardupilot-smartrtl), companion: "
                             "returnlink companion on its telemetry port (--params, --key, --state configure it), or "
                             "applet: returnlink's Lua applet aboard the firmware (its RLNK_ parameters over MAVLink); "
@@ -61,16 +60,17 @@ def add_parser(sim) -> None:
 
 
 def command(args: argparse.Namespace) -> int:
-    from sim.policies import AUTOPILOT_VEHICLES, PX4_VEHICLE
+    from sim.registry import AUTOPILOT_VEHICLES, Outside, needing, outside
 
     sc = scenario(args.scenario, args.seed, args)
-    if args.px4 and args.vehicle != PX4_VEHICLE:
-        raise fail(f"--px4 goes with --vehicle {PX4_VEHICLE} (got vehicle {args.vehicle or sc.vehicle})")
+    if args.px4 and outside(args.vehicle) is not Outside.PX4:
+        raise fail(f"--px4 goes with --vehicle {' or '.join(needing(Outside.PX4))} (got vehicle "
+                   f"{args.vehicle or sc.vehicle})")
     if args.vehicle in AUTOPILOT_VEHICLES:
         return serve_autopilot.command(args, sc, args.vehicle)
     if args.policy or args.firmware:
-        raise fail("--policy and --firmware go with --vehicle ardurover or px4rover (the native vehicle flies its "
-                   "own plan)")
+        raise fail(f"--policy and --firmware go with --vehicle {' or '.join(AUTOPILOT_VEHICLES)} (the native vehicle "
+                   "flies its own plan)")
     params = parm_file(args.params)
     if args.out:
         writable_dir(Path(args.out))  # the plot is written on exit: know now that it can be

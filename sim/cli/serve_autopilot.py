@@ -62,17 +62,19 @@ def command(args: argparse.Namespace, sc, kind: str) -> int:
     """Serve the autopilot of vehicle ``kind`` until it stops, the run's duration ends or the user interrupts;
     then its trajectory. 1: the autopilot failed; 2: the one given is no usable PX4."""
     from sim.firmware.process import stop_on_terminate
-    from sim.policies import COMPANION_POLICY, PX4_VEHICLE
+    from sim.registry import BY_POLICY, Outside, needing, outside
     from sim.report import trajectory
 
     policy = policy_for(args, kind)
-    companion = policy == COMPANION_POLICY
-    if kind == PX4_VEHICLE and args.firmware:
-        raise fail("--firmware goes with --vehicle ardurover; PX4 is found by --px4 DIR or RETURNLINK_PX4")
-    who = "PX4" if kind == PX4_VEHICLE else "the ArduPilot firmware"
+    companion = BY_POLICY[policy].beside
+    px4 = outside(kind) is Outside.PX4
+    if px4 and args.firmware:
+        raise fail(f"--firmware goes with --vehicle {' or '.join(needing(Outside.ARDUPILOT))}; PX4 is found by "
+                   "--px4 DIR or RETURNLINK_PX4")
+    who = outside(kind).label
     if not companion:
         _refuse_companion_options(args, who)
-    pilot = (_px4 if kind == PX4_VEHICLE else _ardupilot)(args)
+    pilot = (_px4 if px4 else _ardupilot)(args)
     out = Path(args.out) if args.out else Path("out") / f"serve-{sc.name}-{kind}"
     writable_dir(out)
     peers = tuple(args.peer) if args.peer else DEFAULT_PEERS
@@ -132,11 +134,11 @@ def _announce(args: argparse.Namespace, sc, policy: str, companion: bool, pilot:
               keystore) -> None:
     """The opening line on stderr: the scenario, the autopilot and what flies its returns, where it listens and
     sends, and the companion's signing key."""
-    from sim.policies import APPLET_POLICY
+    from sim.registry import BY_POLICY
 
     host, port = server.address
     what = (f"returnlink companion on {pilot.link}" if companion else "returnlink's Lua applet aboard"
-            if policy == APPLET_POLICY else f"policy {policy}")
+            if BY_POLICY[policy].aboard else f"policy {policy}")
     print(f"returnlink: {sc.name} with {pilot.who} ({pilot.binary}, {what}) on udp {host}:{port}, sending to "
           + serving_line(peers, args.perfect_link)
           + ("" if keystore is None else f"; the companion signs with key {keystore.key.fingerprint} from "

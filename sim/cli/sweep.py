@@ -7,7 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from sim.cli.common import add_firmware_option, add_px4_option, firmware_binary, px4_dir, usage_error
+from sim.cli.common import add_firmware_option, add_px4_option, autopilot_path, usage_error
 
 
 def add_parser(sim) -> None:
@@ -73,16 +73,12 @@ def _with_autopilots(spec, args: argparse.Namespace):
     import os
     from dataclasses import replace
 
-    from sim.firmware.locate import ENV as FIRMWARE_ENV
-    from sim.policies import FIRMWARE_VEHICLE, PX4_VEHICLE
-    from sim.px4.locate import ENV as PX4_ENV
+    from sim.registry import AUTOPILOT_VEHICLES, outside
 
-    autopilots = ((FIRMWARE_VEHICLE, FIRMWARE_ENV, lambda: firmware_binary(args.firmware)),
-                  (PX4_VEHICLE, PX4_ENV, lambda: px4_dir(args.px4)))
-    for vehicle, env, locate in autopilots:
+    for vehicle in AUTOPILOT_VEHICLES:
         if any(t.vehicle == vehicle for t in spec.trials):
-            binary = str(locate())
-            os.environ[env] = binary
+            binary = str(autopilot_path(args, vehicle))
+            os.environ[outside(vehicle).env] = binary
             spec = replace(spec, trials=tuple(replace(t, firmware=binary) if t.vehicle == vehicle else t
                                               for t in spec.trials))
     return spec

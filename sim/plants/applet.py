@@ -30,11 +30,11 @@ from pathlib import Path
 from link.plan_items import NAV_RETURN_TO_LINK
 from link.proxy import RadioReport
 from link.radio import LinkState
+from sim import registry
 from sim.firmware.applet_operator import AppletOperator
 from sim.firmware.lockstep import MODE_NAMES, SPEEDUP, Lockstep
 from sim.firmware.operator import GUIDED, RETURN_MODES
 from sim.plants.firmware import FirmwarePlant, firmware_params
-from sim.policies import APPLET_POLICY, FIRMWARE_VEHICLE
 from sim.scenario import Scenario
 from vehicle.applet import SCRIPT, TEXT_PREFIX
 from vehicle.params import load_defaults
@@ -71,11 +71,11 @@ def applet_params(scenario: Scenario) -> dict[str, float]:
 class AppletPlant(FirmwarePlant):
     """The firmware with returnlink's Lua applet aboard (see the module docstring)."""
 
-    policies = (APPLET_POLICY,)
+    policies = registry.APPLET_PLANT.policies
     mode_names = {**MODE_NAMES, RETURNING: "GUIDED (applet)"}
 
-    def __init__(self, scenario: Scenario, kind: str = FIRMWARE_VEHICLE, seed: int | None = None,
-                 policy: str = APPLET_POLICY, firmware: Path | None = None, log_path: Path | None = None,
+    def __init__(self, scenario: Scenario, kind: str = FirmwarePlant.kind, seed: int | None = None,
+                 policy: str = policies[0], firmware: Path | None = None, log_path: Path | None = None,
                  speedup: float = SPEEDUP, script: Path = SCRIPT, backstop_s: float = BACKSTOP_S) -> None:
         """``script``: the Lua file to carry (the tests give a broken one to see the backstop take over);
         ``backstop_s``: the firmware's FS_GCS_TIMEOUT."""

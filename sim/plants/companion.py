@@ -40,12 +40,12 @@ from __future__ import annotations
 from pathlib import Path
 
 from gcs.plans import from_plan_items
+from sim import registry
 from sim.firmware.companion_operator import CompanionOperator
 from sim.firmware.lockstep import SPEEDUP
 from sim.firmware.process import FirmwareError
 from sim.plants.beside import CompanionSide, companion_params
 from sim.plants.firmware import FirmwarePlant
-from sim.policies import COMPANION_POLICY, FIRMWARE_VEHICLE
 from sim.scenario import Scenario
 from vehicle.params import Params
 
@@ -57,11 +57,12 @@ class CompanionPlant(CompanionSide, FirmwarePlant):
     ``params`` (the defaults with the scenario's own on top, if not given) and ``companion_options`` are the
     companion's, as ``sim serve`` boots it with its kept files and key."""
 
-    policies = (COMPANION_POLICY,)
+    policies = registry.COMPANION_PLANT.policies
     FAILURE = FirmwareError
+    rangefinders = True  # the rover's six, which the firmware reports as DISTANCE_SENSOR (issue 41)
 
-    def __init__(self, scenario: Scenario, kind: str = FIRMWARE_VEHICLE, seed: int | None = None,
-                 policy: str = COMPANION_POLICY, firmware: Path | None = None, log_path: Path | None = None,
+    def __init__(self, scenario: Scenario, kind: str = FirmwarePlant.kind, seed: int | None = None,
+                 policy: str = policies[0], firmware: Path | None = None, log_path: Path | None = None,
                  speedup: float = SPEEDUP, params: Params | None = None, **companion_options) -> None:
         super().__init__(scenario, kind, seed, policy, firmware, log_path, speedup)
         if params is None:

@@ -29,25 +29,19 @@ import math
 from pathlib import Path
 
 from link.radio import subsystem_rng
+from sim import registry
 from sim.firmware import rangefinders
 from sim.firmware.lockstep import MODE_NAMES, SKID_PARAMS, SPEEDUP, Lockstep
 from sim.firmware.operator import RETURN_MODES, FirmwareOperator
 from sim.firmware.rangefinders import Rangefinders
 from sim.plants.autopilot import AutopilotPlant
-from sim.policies import (
-    APPLET_POLICY,
-    COMPANION_POLICY,
-    DEFAULT_FIRMWARE_POLICY,
-    FAILSAFE_POLICIES,
-    FIRMWARE_VEHICLE,
-)
 from sim.scenario import Scenario, Station
 from vehicle.companion.setup import NEEDS
 
-# per policy; the companion's is the backstop: Hold once a dead companion's keepalive stops (docs/architecture.md §11)
-# the applet's too: Hold once its return has not found the link by FS_GCS_TIMEOUT, or it died (sim.plants.applet)
-FS_ACTION: dict[str, int] = {"ardupilot-hold": 2, "ardupilot-rtl": 1, "ardupilot-smartrtl": 4, COMPANION_POLICY: 2,
-                             APPLET_POLICY: 2}
+# per policy, from the registry; the companion's is the backstop: Hold once a dead companion's keepalive stops
+# (docs/architecture.md §11); the applet's too: Hold once its return has not found the link by FS_GCS_TIMEOUT, or
+# it died (sim.plants.applet)
+FS_ACTION: dict[str, int] = {p.name: p.fs_action for p in registry.POLICIES if p.fs_action is not None}
 
 
 def firmware_params(policy: str, lnk_timeout: float, max_speed: float,
@@ -77,7 +71,7 @@ def firmware_params(policy: str, lnk_timeout: float, max_speed: float,
               **SKID_PARAMS}
     if max_accel is not None:
         params["ATC_ACCEL_MAX"] = round(max_accel, 3)
-    if policy == COMPANION_POLICY:
+    if registry.BY_POLICY[policy].beside:
         params |= rangefinders.params()
         for need in NEEDS:
             value = params.get(need.name, 0.0)  # ArduPilot's default of the others is 0
@@ -91,23 +85,24 @@ class FirmwarePlant(AutopilotPlant):
     per tick: (t, true x, true y, est x, est y, mode, link delivery, rssi, speed cmd, yaw rate cmd, armed,
     collisions so far); ``heard`` the scenario times at which it received a frame from the operator's station."""
 
-    kind = FIRMWARE_VEHICLE
-    policies: tuple[str, ...] = FAILSAFE_POLICIES  # what this plant flies
+    kind = registry.FIRMWARE_PLANT.vehicles[0]
+    policies: tuple[str, ...] = registry.FIRMWARE_PLANT.policies  # what this plant flies
+    rangefinders = False  # the firmware's own failsafes use none (the companion's rover has them: issue 41)
     autopilot = "ArduPilot"
     # what the modes mean, for the figures and pictures
     mode_names = MODE_NAMES
     return_modes = RETURN_MODES
 
-    def __init__(self, scenario: Scenario, kind: str = FIRMWARE_VEHICLE, seed: int | None = None,
-                 policy: str = DEFAULT_FIRMWARE_POLICY, firmware: Path | None = None, log_path: Path | None = None,
-                 speedup: float = SPEEDUP) -> None:
+    def __init__(self, scenario: Scenario, kind: str = kind, seed: int | None = None,
+                 policy: str = registry.default_policy(kind), firmware: Path | None = None,
+                 log_path: Path | None = None, speedup: float = SPEEDUP) -> None:
         """``speedup``: the firmware's own pace; lockstep runs leave the pace to the bridge (``SPEEDUP``), a
         server in real time asks for 1."""
         self._set_scene(scenario, kind, seed, policy, firmware, "firmware binary")
         # the companion's rover carries rangefinders, which it hears through the firmware (issue 41); the
         # firmware's own failsafes use none, and their runs stay as they were measured
         rangefinders = (Rangefinders(self.world, subsystem_rng(self.seed, "rangefinders"))
-                        if policy == COMPANION_POLICY else None)
+                        if self.rangefinders else None)
         self.link = Lockstep(self.world, self.robot, firmware,
                              firmware_params(policy, self.lnk_timeout, self.robot.max_speed,
                                              self.robot.max_accel), speedup, log_path, rangefinders=rangefinders)

@@ -17,6 +17,7 @@ from pathlib import Path
 from gcs.plans import from_plan_items
 from gcs.station import GroundStation
 from link.radio import LinkState
+from sim import registry
 from sim.compare import EXACT
 from sim.driver import simulated_vehicle
 from sim.metrics import lease_figures
@@ -42,6 +43,7 @@ class NativePlant:
     frame_offset = (0.0, 0.0)  # the vehicle's frame is the true one: its estimator starts at its true pose
     stale = 0  # no guard of its own beside the vehicle's, which the loop audits
     repeatability = EXACT  # deterministic: the same scenario and seed give the same metrics, bit for bit
+    policies: tuple[str, ...] = registry.NATIVE_PLANT.policies  # what this plant flies (its kind: the robot's)
 
     def __init__(self, scenario: Scenario, kind: str, seed: int, policy: str, param_file: Path | None = None,
                  boot_epoch: int | None = None, on_epoch: Callable[[int], str | None] | None = None,

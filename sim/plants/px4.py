@@ -31,15 +31,17 @@ from pathlib import Path
 
 from link.mission import Origin
 from link.radio import subsystem_rng
+from sim import registry
 from sim.firmware.rangefinders import Rangefinders
 from sim.plants.autopilot import AutopilotPlant
-from sim.policies import PX4_FAILSAFE_POLICIES, PX4_VEHICLE
 from sim.px4.lockstep import HOLD, NAV_STATES, OFFBOARD, RETURN, PX4Lockstep, nav_state_name
 from sim.px4.operator import RETURN_MODES, PX4Operator
 from sim.scenario import Scenario, Station
 
-NAV_DLL_ACT = {"px4-hold": 1, "px4-return": 2}  # PX4's data-link loss action per policy: Hold, Return
-COM_OBL_RC_ACT = {"px4-hold": 5, "px4-return": 3}  # its Offboard-loss action: the same Hold (5) or Return (3)
+# PX4's data-link loss action per policy (Hold 1, Return 2) and its Offboard-loss action (the same Hold 5 or
+# Return 3), from the registry
+NAV_DLL_ACT = {p.name: p.nav_dll_act for p in registry.POLICIES if p.nav_dll_act is not None}
+COM_OBL_RC_ACT = {p.name: p.com_obl_rc_act for p in registry.POLICIES if p.com_obl_rc_act is not None}
 COM_OF_LOSS_T_MAX = 60.0  # s: the top of COM_OF_LOSS_T's range
 
 
@@ -79,8 +81,8 @@ class PX4Plant(AutopilotPlant):
     lockstep with ``robot`` (``PX4Lockstep``: its process, its bridge, its ``tap``); ``rows`` its record per tick;
     ``heard`` the scenario times at which it received a frame from the operator's station."""
 
-    kind = PX4_VEHICLE
-    policies: tuple[str, ...] = PX4_FAILSAFE_POLICIES  # what this plant flies
+    kind = registry.PX4_PLANT.vehicles[0]
+    policies: tuple[str, ...] = registry.PX4_PLANT.policies  # what this plant flies
     # what the modes mean, for the firmware's figures and pictures
     autopilot = "PX4"
     mode_names = NAV_STATES
@@ -89,8 +91,8 @@ class PX4Plant(AutopilotPlant):
     driving_mode = OFFBOARD
     home_modes = (RETURN,)
 
-    def __init__(self, scenario: Scenario, kind: str = PX4_VEHICLE, seed: int | None = None,
-                 policy: str = "px4-return", px4: Path | None = None, log_path: Path | None = None,
+    def __init__(self, scenario: Scenario, kind: str = kind, seed: int | None = None,
+                 policy: str = registry.default_policy(kind), px4: Path | None = None, log_path: Path | None = None,
                  accept_timeout_s: float | None = None) -> None:
         """``px4``: the PX4 directory (``sim.px4.locate.find_px4``); ``accept_timeout_s``: its boot budget, the
         wall seconds it gets to connect to the simulator link."""

@@ -27,9 +27,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from gcs.plans import from_plan_items
+from sim import registry
 from sim.plants.beside import CompanionSide, companion_params
 from sim.plants.px4 import PX4Plant
-from sim.policies import COMPANION_POLICY, PX4_VEHICLE
 from sim.px4.companion_operator import PX4CompanionOperator
 from sim.px4.process import PX4Error
 from sim.scenario import Scenario, Station
@@ -60,13 +60,13 @@ class PX4CompanionPlant(CompanionSide, PX4Plant):
     """PX4 with returnlink companion on its telemetry link (see the module docstring). ``companion`` is the
     companion; ``vehicle`` its vehicle once booted; ``forwarded`` the ground frames it passed to PX4."""
 
-    policies = (COMPANION_POLICY,)
+    policies = registry.PX4_COMPANION_PLANT.policies
     FAILURE = PX4Error
     rangefinders = True  # the rover's six, through PX4 (DISTANCE_SENSOR on its simulator link): issue 41
     WORDS = ("{version}", "telemetry link", "PX4", "PX4's", "PX4 nav states")
 
-    def __init__(self, scenario: Scenario, kind: str = PX4_VEHICLE, seed: int | None = None,
-                 policy: str = COMPANION_POLICY, px4: Path | None = None, log_path: Path | None = None,
+    def __init__(self, scenario: Scenario, kind: str = PX4Plant.kind, seed: int | None = None,
+                 policy: str = policies[0], px4: Path | None = None, log_path: Path | None = None,
                  accept_timeout_s: float | None = None, params: Params | None = None, **companion_options) -> None:
         super().__init__(scenario, kind, seed, policy, px4, log_path, accept_timeout_s)
         self.lnk_timeout = float(scenario.params.get("LNK_TIMEOUT", 3.0))  # the companion's, not PX4's
