@@ -69,8 +69,9 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     a = ap.parse_args()
     from sim import outputs
-    from sim.maps import mapfile, routes
+    from sim.maps import mapfile
     from sim.runner import Run
+    from sim.worlds import map_routes as routes
     from sim.worlds.resolve import load
 
     with tempfile.TemporaryDirectory() as tmp:

@@ -17,11 +17,7 @@ from sim.world import World  # noqa: E402
 def draw_world(ax, world: World, bounds: tuple[float, float, float, float] | None = None) -> None:
     """Plan view with east to the right and north up (x north, y east in the local frame); a map world's cells
     under it all."""
-    grid = getattr(world, "grid", None)
-    if grid is not None:
-        from sim.maps.draw import draw_grid
-
-        draw_grid(ax, grid)
+    world.draw_under(ax)
     for wall in world.walls:
         pts = np.array(wall.points)
         ax.plot(pts[:, 1], pts[:, 0], color="0.25", lw=max(1.0, wall.thickness * 3), solid_capstyle="round",

@@ -204,7 +204,7 @@ def read_map(r: Reader, raw: dict, file: str) -> MapTable | None:
 @dataclass(frozen=True)
 class MapWorld:
     """A file with ``[map]`` and no ``[operator]``: the map, the station, the radio and what the file sets; the
-    route is drawn per seed (``sim.maps.routes``)."""
+    route is drawn per seed (``sim.worlds.map_routes``)."""
 
     file: str
     table: MapTable

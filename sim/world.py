@@ -102,6 +102,9 @@ class World:
     def _separate(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: object) -> None:
         self._touching = max(0, self._touching - 1)
 
+    def draw_under(self, ax) -> None:
+        """What a plan view draws under the walls: nothing for a drawn world (a map world draws its cells)."""
+
     def gps_denied(self, x: float, y: float) -> bool:
         for edges in self._denied_edges:  # noqa: SIM110 - a loop, not any() over a generator, at every fix time
             if _inside(x, y, edges):

@@ -13,10 +13,11 @@ from PIL import Image
 
 from link.radio import RadioParams
 from sim import scenario
-from sim.maps import coverage, mapfile, routes
+from sim.maps import coverage, mapfile
 from sim.maps.grid import Grid, Site
 from sim.scenario import ScenarioError
 from sim.worlds import check, resolve
+from sim.worlds import map_routes as routes
 from sim.worlds.toml_out import to_toml
 from tests import site_maps
 

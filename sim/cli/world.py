@@ -58,6 +58,6 @@ def _verdict(sc):
         return verdict
     from dataclasses import replace
 
-    from sim.maps.routes import route_clearance
+    from sim.worlds.map_routes import route_clearance
 
     return replace(verdict, clearance_m=route_clearance(sc))

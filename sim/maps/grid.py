@@ -81,6 +81,18 @@ class Grid:
         self._edges: np.ndarray | None = None
 
     # ----- frames --------------------------------------------------------------------------------------------
+    def draw(self, ax, zorder: float = 0) -> None:
+        """Solid cells dark, open ones white, under a plan view (east right, north up: the map frame itself, so no
+        axes swap), turned by the map origin's yaw about the origin."""
+        from matplotlib import transforms  # (plots only: reading a map needs no matplotlib)
+
+        shade = np.where(self.solid, 0.35, 1.0)
+        extent = (self.ox, self.ox + self.cols * self.res, self.oy, self.oy + self.rows * self.res)
+        im = ax.imshow(shade, origin="lower", extent=extent, cmap="gray", vmin=0.0, vmax=1.0,
+                       interpolation="nearest", zorder=zorder)
+        if self.yaw:
+            im.set_transform(transforms.Affine2D().rotate_around(self.ox, self.oy, self.yaw) + ax.transData)
+
     def uv(self, north: np.ndarray | float, east: np.ndarray | float):
         """World (north, east) to the grid's (u, v) metres."""
         dx, dy = np.asarray(east) - self.ox, np.asarray(north) - self.oy
@@ -272,6 +284,10 @@ class GridWorld(World):
         # radio (the validity check's mean link, a survey) never builds a segment, and a run on a large map
         # builds only the few thousand along its way
         self.step = self._step
+
+    def draw_under(self, ax) -> None:
+        """The map's cells under a plan view (the plots ask the world, so they need not know maps)."""
+        self.grid.draw(ax)
 
     def _step(self, dt: float) -> None:
         self._countdown -= 1

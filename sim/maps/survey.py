@@ -86,13 +86,12 @@ def draw(s: Survey, grid: Grid, station: Station, path: Path, title: str, reach:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from sim.maps.draw import draw_grid
     from sim.plots import save
 
     w, h = grid.cols * grid.res, grid.rows * grid.res
     fig, ax = plt.subplots(figsize=(max(6.0, min(14.0, 9.0 * w / max(w, h) + 3)), max(5.0, min(12.0, 9.0 * h /
                                                                                                  max(w, h)))))
-    draw_grid(ax, grid)
+    grid.draw(ax)
     size = max(0.5, (72.0 * s.cell * 8.0 / max(w, h)) ** 2)
     pts = ax.scatter(s.x, s.y, c=s.delivery, s=size, marker="s", cmap="RdYlGn", vmin=0.0, vmax=1.0, linewidths=0,
                      zorder=1)

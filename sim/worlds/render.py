@@ -25,9 +25,7 @@ def render(sc: Scenario, path: Path, verdict: Verdict | None = None) -> Path:
     """Draw ``sc`` (east to the right, north up, as ``sim/plots.py``) to ``path``."""
     fig, ax = plt.subplots(figsize=(9, 7))
     if sc.site is not None:  # a map world: its cells
-        from sim.maps.draw import draw_grid
-
-        draw_grid(ax, sc.site.grid())
+        sc.site.grid().draw(ax)
     top = max([w.attenuation_db for w in sc.walls] or [1.0])
     norm = colors.Normalize(0.0, max(top, 1.0))
     cmap = plt.get_cmap("plasma_r")

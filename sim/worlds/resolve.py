@@ -14,8 +14,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from sim import scenario, worlds
-from sim.maps.routes import RouteError, draw
 from sim.scenario import Scenario, ScenarioError
+from sim.worlds.map_routes import RouteError, draw
 
 PREFIX = worlds.PREFIX
 MAP_PREFIX = "map:"  # map:PATH.yaml: a world made from a map_server map (docs/architecture.md §7.2)
