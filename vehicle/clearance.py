@@ -1,22 +1,21 @@
 """Free space the robot's range sensor has seen, and the corners of a return's route it lets the robot cut.
 
 Why: a return that retraces its crumbs drives every corner the operator drove, and SmartRTL, which cuts across a
-room to the doorway, gets the link back sooner there (issue 21: building, P95 14.34 s against SmartRTL's 14.20) but
-touches the door frame doing it (17 contacts in 60 trials). The trail alone cannot say whether a shortcut is safe:
-the robot's body swept only a band the width of the robot. A range sensor (lidar, depth camera; ``Readings.scan``)
-says more: every beam crosses space that is free up to its return. A corner is cut only where every cell within
-RTL_CUT_CLR of the shortcut (the robot's half-width plus a margin for the estimate and the follower, measured from
-its centre) was seen free and none was ever seen occupied; anything unseen, and a robot without the sensor, keeps
-the crumbs (docs/architecture.md §6).
+room to the doorway, gets the link back sooner there but touches the door frame doing it (issue 21; the figures are
+in docs/evidence.md, "The measurements behind the vehicle's code"). The trail alone cannot say whether a shortcut is
+safe: the robot's body swept only a band the width of the robot. A range sensor (lidar, depth camera;
+``Readings.scan``) says more: every beam crosses space that is free up to its return. A corner is cut only where
+every cell within RTL_CUT_CLR of the shortcut (the robot's half-width plus a margin for the estimate and the
+follower, measured from its centre) was seen free and none was ever seen occupied; anything unseen, and a robot
+without the sensor, keeps the crumbs (docs/architecture.md §6).
 
 The route is also kept clear of what the sensor saw occupied (``keep_clear``): retraced crumbs run where the
 operator's drive ran, a clip on a door frame included, and native returnlink touched a wall while returning in
-generated office trials (issue 30). Each stretch is pushed sideways to RTL_CUT_CLR from every occupied cell, through
+generated office runs (issue 30). Each stretch is pushed sideways to RTL_CUT_CLR from every occupied cell, through
 seen-free cells only; where the space is not there (a door, a pipe narrower than twice the clearance) it goes as far
-from the walls as the space allows, at its own pace. Not slower there: driving such stretches at the clearance kept
-over the clearance wanted cost the generated culverts' returns 0.8-1.5 s of P95 time to link over the move alone
-(seeds 1-30: rover 6.75 -> 7.57 s, legged 5.77 -> 7.29 s) and two pass flips, and kept no return off a wall the move
-alone did not (0 contacts in returns either way). A robot without the sensor keeps its route exactly.
+from the walls as the space allows, at its own pace. Not slower there: slowing cost the generated culverts' returns
+time to link and kept no return off a wall the move alone did not (docs/evidence.md, "The measurements
+behind the vehicle's code"). A robot without the sensor keeps its route exactly.
 
 The grid lives in the vehicle's estimated frame, the frame of the crumbs, so the drift of dead reckoning in a room
 without fixes moves both together. A cell once seen occupied stays occupied (a person who walked through leaves a
@@ -456,8 +455,7 @@ def _untangle(side: _Sideways, shift: np.ndarray, dist: np.ndarray, d0: np.ndarr
     A line that leaves free cells (a move toward the inside of a bend can cross it) sends its moved ends back. A
     line that goes backward (the inside of a bend, or two crumbs a few cm apart moved by slightly different
     normals) loses a moved end instead: sent back, the crumb would stay between moved neighbours, a zigzag of
-    0.5 m legs the follower crawls through (gen:mine rover seed 132 returned at 0.63 m/s where it had driven
-    1.2)."""
+    0.5 m legs the follower crawls through at half the pace it was driven (docs/evidence.md)."""
     p, tangent = side.p, side.tangent
     k = len(p)
     alive = np.ones(k, dtype=bool)

@@ -134,8 +134,8 @@ class ReturnDriver:
             return 0.0, 0.0
         self.saw_loss = self.saw_loss or link_lost
         # from the first owner packet heard again, not only while packets keep coming: at a fringe they come with
-        # gaps longer than LNK_GOOD_S, and a return that sped up in each gap met the regain at full speed (open rover
-        # seed 4: back to 1.96 m/s when LINK_REGAINED came, 3.1 m driven from the regain window's start)
+        # gaps longer than LNK_GOOD_S, and a return that sped up in each gap met the regain at full speed
+        # (docs/evidence.md, "The measurements behind the vehicle's code")
         self.heard_again = self.heard_again or book.link.heard_again(t)
         try:
             if fresh:

@@ -19,10 +19,11 @@ Two measurements, both pure functions of the packets heard and the time passed i
   longer than LNK_GOOD_S, and whether the link is lost. ``step(t)`` says LOST (silent for LNK_TIMEOUT, or delivery
   below LNK_MIN_Q over LNK_TIMEOUT) or REGAINED: contact that began *after* the loss has lasted LNK_REGAIN_S and the
   owner's delivery over the last LNK_REGAIN_S reaches ``REGAIN_QUALITY`` (DESIGN §6.2). A window, not a run of good
-  packets: one packet lost at the fringe of coverage lowers the share a little instead of restarting the count
-  (issue 38: tunnel rover seed 25 at -20 dBm regained 6.22 s or 10.10 s after a one-tick change). REGAINED also
-  needs the link to pass the very tests LOST applies (heard within LNK_TIMEOUT, delivery over LNK_TIMEOUT not
-  below LNK_MIN_Q): a regain that the next tick would call lost again is not one.
+  packets: one packet lost at the fringe of coverage lowers the share a little instead of restarting the count,
+  so a one-tick change no longer moves a regain by seconds (issue 38; docs/evidence.md, "The measurements behind
+  the vehicle's code"). REGAINED also needs the link to pass the very tests LOST applies (heard within
+  LNK_TIMEOUT, delivery over LNK_TIMEOUT not below LNK_MIN_Q): a regain that the next tick would call lost again
+  is not one.
 
 ``REGAIN_QUALITY`` is the one number behind both the regain and the link map (``vehicle.linkmap``): the map vouches
 for a place only where its lower bound on delivery meets it, so a return sent to a place the map vouches for is sent

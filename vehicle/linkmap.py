@@ -18,8 +18,9 @@ A place *reliably holds* when it has at least LNK_MAP_OBS observations and the W
 delivery (``Z`` = one-sided 95 %) meets the regain's own threshold (``vehicle.link_watch.REGAIN_QUALITY``; or
 LNK_MIN_Q + LNK_MAP_MARGIN where that is stricter): a lucky packet at the fringe, or a short look at a cell, never
 makes a place reliable, and a long good look makes it so even if a few packets were lost. Why the regain's number
-and not LNK_MIN_Q's (DESIGN §6.2): a place is worth returning to only if LINK_REGAINED can come there; a bound of 0.55
-vouched for places where the regain's 80 % never came (issue 38: building seed 5, 29.8 s to link).
+and not LNK_MIN_Q's (DESIGN §6.2): a place is worth returning to only if LINK_REGAINED can come there, and a
+looser bound vouched for places where it never came (issue 38; docs/evidence.md, "The measurements behind the
+vehicle's code").
 
 Cost and memory (the map runs in the 50 Hz loop, docs/architecture.md §8): ``at`` is a few float operations and one
 dict lookup when the robot changes cell; ``packet`` is a handful. Memory is bounded by LNK_MAP_CELLS: when a new cell

@@ -141,8 +141,8 @@ def target_index(link_good: np.ndarray, target: Target, link_lost: bool) -> int:
 def heard_stretch(link_good: np.ndarray, goal: int) -> int:
     """Index of the crumb where the last stretch driven with the link ended, at or before ``goal``: the newest
     link-good crumb whose predecessor was link-good too (-1: none). A lone link-good crumb among lost ones is a
-    moment's packet in a dead place, not a way the link holds along (building rover seed 5: one packet heard 4 m
-    inside the far room, where the link came back only at the door)."""
+    moment's packet in a dead place, not a way the link holds along (a packet heard deep in a room whose link came
+    back only at the door; docs/evidence.md, "The measurements behind the vehicle's code")."""
     good = np.asarray(link_good[: goal + 1], dtype=bool)
     both = np.flatnonzero(good[1:] & good[:-1])
     return int(both[-1]) + 1 if len(both) else -1
@@ -371,18 +371,15 @@ def _cut_corners(pts: np.ndarray, speeds: np.ndarray, heard: float, free: FreeSp
     which on the route is also kept clear of what the sensor saw occupied (0: all of it).
 
     The link comes back first on the stretch where it was last heard, so the route drives that stretch as it was
-    driven: a straight line from a dead end to a place beyond trades the known way to the link for an unknown one.
-    gen:mine rover seed 124: a cut from the end of a side drift to the shaft 3 m on stayed in the drift's radio
-    shadow and began with a turn on the spot, 6.80 s to link against 5.56 s backing up the crumbs (5.40 s now);
-    building legged seed 4: a cut across the room from the doorway's last heard crumb, 5.80 s against 4.94 s.
-    Before that stretch the robot is in the dead place it drove into, where a cut across seen free space loses
-    nothing (building rover seed 5: across the far room to its door, 13.52 s against 14.34 s).
+    driven: a straight line from a dead end to a place beyond trades the known way to the link for an unknown one,
+    and reached the link later where it was tried. Before that stretch the robot is in the dead place it drove
+    into, where a cut across seen free space loses nothing.
 
     Up to that stretch's end the route is not pushed off the walls either (``keep_clear``): the operator drove the
     dead end along a wall, the link returns along those crumbs, and a route 0.5 m off them is a route into the
-    drift's radio shadow (gen:mine rover seeds 188, 203, 220: 5.86, 6.40, 6.04 s to link against back-up's 5.38,
-    5.42, 5.58; kept to the crumbs, 5.38, 5.42, 5.60). The body is kept off those walls where it matters, in the
-    body frame, whatever the estimate's error (``vehicle.standoff``)."""
+    drift's radio shadow. The body is kept off those walls where it matters, in the body frame, whatever the
+    estimate's error (``vehicle.standoff``). The figures behind each sentence: docs/evidence.md, "The measurements
+    behind the vehicle's code"."""
     cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
     if heard <= 0.0 or heard >= cum[-1] - 1e-6:  # no such stretch, or the route ends on it: every corner
         cut, cut_speeds = shortcut(pts, speeds, free, clearance)

@@ -208,9 +208,8 @@ def _first_move(st: ServiceState, x: float, y: float, yaw: float, t: float, para
 
     Why: a block that drove only from the next tick started 20 ms behind a baseline that drives at once, 1.5 cm at
     walking pace and kept all the way, and at the sharp edge of a wall's radio shadow 1.5 cm decides whether a
-    telemetry packet is heard or the station waits for the next one 0.25 s later (gen:mine legged seed 118: 5.44 s
-    to link against back-up's 5.16; over the mine's seeds 101-180 returnlink was the slower of the two in 18
-    trials and the faster in 5)."""
+    telemetry packet is heard or the station waits for the next one 0.25 s later (the mine runs that showed it:
+    docs/evidence.md, "The measurements behind the vehicle's code")."""
     cmd = _follow(st, x, y, yaw, FollowerConfig.from_params(params), link_lost, regaining,
                   _approach_cap(st, params, approach))
     if cmd.arrived:  # there already: the next tick's step handles the arrival, as for any route
