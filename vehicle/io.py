@@ -31,9 +31,7 @@ class Scan(NamedTuple):
 
 
 class Readings(NamedTuple):
-    """One control tick's sensor data. A named tuple rather than a frozen dataclass: a driver builds one every
-    20 ms tick, and a tuple is built at a third of the cost (a frozen dataclass sets each of its seven fields
-    through ``object.__setattr__``), with the same names and immutability."""
+    """One control tick's sensor data: an immutable record, built by the driver every tick."""
 
     t: float
     speed: float  # odometry forward speed, m/s

@@ -40,10 +40,9 @@ DT = 0.02  # the control tick: 50 Hz (the tick is ``vehicle.control.ControlLoop`
 class Status(NamedTuple):
     """What the vehicle is and knows at one moment: read-only, built by the core, never changed by a reader.
 
-    A named tuple rather than a frozen dataclass for the reason ``vehicle.estimator.Pose`` and ``vehicle.io.Readings``
-    are one: it is made every 20 ms tick, a tuple is built at a third of the cost, with the same names and the same
-    immutability. Every field is a plain value or an immutable one (the lease book is a frozen value: a transition
-    makes a new book, so holding this one changes nothing in the core)."""
+    A named tuple, like ``vehicle.estimator.Pose`` and ``vehicle.io.Readings``. Every field is a plain value or an
+    immutable one (the lease book is a frozen value: a transition makes a new book, so holding this one changes
+    nothing in the core)."""
 
     t: float  # the time of the last tick
     pose: Pose  # the estimate (never ground truth: it is all a real vehicle knows)

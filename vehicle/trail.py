@@ -52,8 +52,7 @@ class TrailConfig:
 
 
 class Crumb(NamedTuple):
-    """One estimator output as the trail sees it. A named tuple rather than a frozen dataclass: the vehicle lays
-    one every 20 ms tick, and a tuple is built at a third of the cost, with the same names and immutability."""
+    """One estimator output as the trail sees it: an immutable record, laid every tick."""
 
     x: float
     y: float
