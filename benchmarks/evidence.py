@@ -89,6 +89,12 @@ def seconds(v: float | None, digits: int) -> str:
     return "never" if math.isinf(v) else f"{v:.{digits}f}"
 
 
+def with_unit(v: float | None, digits: int) -> str:
+    """``seconds`` with its unit: "5.30 s", and "never" or "-" bare."""
+    text = seconds(v, digits)
+    return text if v is None or math.isinf(v) else f"{text} s"
+
+
 def mean(values: list[float]) -> float | None:
     return float(np.mean(values)) if values else None
 
@@ -191,8 +197,8 @@ def seek_table(rows: list[dict], split: list[str]) -> str:
                 if not rs:
                     continue
                 ttl = ttl_values(rs)
-                times = " / ".join(seconds(p(ttl, q), 1) for q in (50, 90, 95))
-                times += "" if times.endswith("never") else " s"  # (seconds, unless the P95 trial never regained)
+                *lower, top = (p(ttl, q) for q in (50, 90, 95))
+                times = " / ".join([*(seconds(v, 1) for v in lower), with_unit(top, 1)])
                 rest = mean(rests(rs))
                 label = _label(pol, json.loads(value)) if pol in split else pol
                 lines.append(f"| {robot} | {label} | {times} | {'-' if rest is None else f'{rest:.1f} m'} | "
@@ -242,7 +248,7 @@ def drive_table(rows: list[dict], order: list[str] | None, policies: list[str]) 
             robots = ", ".join(sorted({r["vehicle"] for r in rs}))
             lines.append(f"| {sc} | {robots} | {pol} | {len(rs)} | {contacts(rs)} | "
                          f"{sum(int(r.get('collisions') or 0) for r in rs)} | {losses:.2f} | "
-                         f"{seconds(p95, 2)}{'' if p95 is None or math.isinf(p95) else ' s'} | {ratio} |")
+                         f"{with_unit(p95, 2)} | {ratio} |")
     return "\n".join(lines)
 
 
@@ -273,8 +279,7 @@ def spread_table(rows: list[dict], param: str, before: list[dict] | None = None,
         if rs is None:
             continue
         for robot, gaps in sorted(perturbation_gaps(rs, param).items()):
-            shown = [seconds(v, 2) + ("" if v is None or math.isinf(v) else " s")
-                     for v in (mean(gaps), p(gaps, 95), max(gaps))]
+            shown = [with_unit(v, 2) for v in (mean(gaps), p(gaps, 95), max(gaps))]
             lines.append(f"| {label} | {robot} | {len(gaps)} | {' | '.join(shown)} | "
                          f"{sum(1 for g in gaps if g > 1.0)} |")
     return "\n".join(lines)

@@ -86,8 +86,6 @@ class ThroughCompanion:
 
 
 class CompanionOperator(ThroughCompanion, FirmwareOperator):
-    lets_go = True  # a frozen picture: the hand off the stick, streamed at rest as the native station's is
-
     def __init__(self, route, resume_route, origin: tuple[float, float], plan: list[Item], attempts: int = 2,
                  sysid: int = GCS_SYSID, compid: int = GCS_COMPID, target_system: int = 1,
                  rejoin: bool = True) -> None:
