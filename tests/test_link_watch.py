@@ -287,6 +287,32 @@ def test_regaining_while_contact_is_back_but_the_regain_not_yet_due():
     assert trig is Trigger.REGAINED and not w.regaining(w.last_heard)
 
 
+def test_the_approach_holds_while_heard_well_not_after_a_stray_packet():
+    """What holds a return at its approach speed (issue 38): a packet heard again after a loss, only until the next
+    shows the owner's stream arriving one packet in five; after a silence, the stream coming back whole, from its
+    first packet, and from its third to the block's end (the regain's window filling). Where the delivery rises
+    gradually instead, the window fills and the regain comes together."""
+    st = Station(LinkWatch(cfg()))
+    st.run(0.0, 5.0)
+    st.run(5.0, 10.0, arrives=lambda k, t: False)
+    st.send(10.0)  # a stray packet
+    st.step(10.0)
+    assert st.watch.heard_again(10.0) and st.watch.heard_well(10.0) and not st.watch.regain_begun(10.0)
+    well = []
+    begun = []
+    for n in range(501, 1000):
+        t = n * 0.02
+        if n % 5 == 0:
+            st.send(t, t >= 18.0 - 1e-9 or (t < 16.0 and (n // 5) % 5 == 0))
+        st.step(t)
+        if st.watch.regain_begun(t):
+            begun.append(t)
+        if st.watch.heard_well(t):
+            well.append(t)
+    assert not [t for t in well if 10.5 - 1e-9 <= t < 18.0]  # the next packet showed the gaps
+    assert begun and 18.2 - 1e-9 <= begun[0] <= 18.2 + 0.021, begun[:3]  # 18.0, 18.1, 18.2: three of three
+
+
 def test_one_lost_packet_at_the_fringe_does_not_restart_the_regain():
     """A 4 Hz stream heard again after an outage, one packet of it lost half a second in: LINK_REGAINED comes
     LNK_REGAIN_S after the link came back, as it would have without the loss (delivery over the window 4 of 5),

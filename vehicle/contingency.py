@@ -107,7 +107,8 @@ class ReturnDriver:
         self.way: Way | None = None
         self.way_chain: int | None = None
         self.saw_loss = False  # the running block has run with the owner's link lost
-        self.heard_again = False  # ... and heard the owner again since: it approaches (RTL_APPROACH_SPD) to its end
+        self.approaching = False  # ... and the regain's window began to fill since: it approaches (RTL_APPROACH_SPD)
+        # to its end
 
     def stand_down(self) -> None:
         """An operator lease is current: no block runs."""
@@ -127,23 +128,24 @@ class ReturnDriver:
         fresh = self.service is None or self.index != cur.index
         linkmap = v.linkmap
         if fresh:
-            self.saw_loss = self.heard_again = False
+            self.saw_loss = self.approaching = False
         elif self.deferred(cur, link_lost) and linkmap.reliable(x, y):
             # heard again short of the place the map vouches for, and now there: the return ends here
             v.apply(v.book.regained_here(t))
             return 0.0, 0.0
         self.saw_loss = self.saw_loss or link_lost
-        # from the first owner packet heard again, not only while packets keep coming: at a fringe they come with
-        # gaps longer than LNK_GOOD_S, and a return that sped up in each gap met the regain at full speed
-        # (docs/evidence.md, "The measurements behind the vehicle's code")
-        self.heard_again = self.heard_again or book.link.heard_again(t)
+        # the approach speed while the owner is heard as if the link were back, and from the moment the regain's
+        # window began to fill to the block's end (``LinkWatch.heard_well``, ``regain_begun``; docs/evidence.md,
+        # "The measurements behind the vehicle's code")
+        self.approaching = self.approaching or book.link.regain_begun(t)
+        approach = self.approaching or book.link.heard_well(t)
         try:
             if fresh:
-                step = self._begin(cur, x, y, yaw, t, trail, outbound_speed, free)
+                step = self._begin(cur, x, y, yaw, t, trail, outbound_speed, free, approach)
             else:
                 step = step_block(self.service, x, y, yaw, t, trail, v.params, link_lost, outbound_speed,
                                   slipping=estimator.slipping, linkmap=linkmap, regaining=book.link.regaining(t),
-                                  free=free, approach=self.heard_again)
+                                  free=free, approach=approach)
         except Exception as e:  # noqa: BLE001 - the return runs when nobody can restart the vehicle
             return self._fault(cur.index, e, t)
         step = self._took(step, cur, fresh, book.current_id, t)
@@ -153,7 +155,7 @@ class ReturnDriver:
         return keep_off(seen, t, x, y, yaw, step.speed, step.yaw_rate, v.params["RTL_BODY_R"], FOLLOWER.max_yaw_rate)
 
     def _begin(self, cur: ExecutionLease, x: float, y: float, yaw: float, t: float, trail: Trail,
-               outbound_speed: float, free: FreeSpace) -> ServiceStep:
+               outbound_speed: float, free: FreeSpace, approach: bool) -> ServiceStep:
         """The first step of a new block: a block of the same chain resumes the way the last one was on."""
         v = self.vehicle
         book = v.book
@@ -161,7 +163,7 @@ class ReturnDriver:
         if self.way is not None and self.way_chain == cur.chain:
             resume = self.way.resumed((x, y), self.way.length)
         return start_block(cur.block, x, y, t, trail, v.params, book.link.lost, outbound_speed, v.linkmap, resume,
-                           free=free, yaw=yaw, regaining=book.link.regaining(t), approach=self.heard_again)
+                           free=free, yaw=yaw, regaining=book.link.regaining(t), approach=approach)
 
     def _took(self, step: ServiceStep, cur: ExecutionLease, fresh: bool, current_id, t: float) -> ServiceStep:
         """The block's step taken on: its state and way kept, a new route under a new sublease (the item it

@@ -139,6 +139,22 @@ class Delivery:
         span_u = a[-1][1] - a[0][1]
         return span_t / span_u if span_t > 0 and span_u > 0 else None
 
+    def share_since(self, t: float, window: float, since: float) -> tuple[float | None, int]:
+        """The delivery over the last ``window`` seconds and the packets in it, charging no packet sent before
+        ``since`` (the first packet of a contact: what a silence before it swallowed is not this contact's loss)."""
+        if self.newest is None or self.repeats >= STUCK_REPEATS:
+            return None, 0
+        start = max(t - window, since) - EPS
+        inside, lo, hi, before = 0, 0, 0, None
+        for ta, u in self.arrivals:
+            if ta > start:
+                lo = u if not inside else min(lo, u)
+                hi = max(hi, u)
+                inside += 1
+            elif ta >= since - EPS:
+                before = u if before is None else max(before, u)
+        return _share(inside, lo, hi, before), inside
+
     def covers(self, t: float, window: float) -> bool:
         """Whether the window reaches ``window`` seconds back from ``t`` (a ratio over it is a full measure)."""
         return bool(self.arrivals) and self.arrivals[0][0] <= t - window + EPS
@@ -332,10 +348,41 @@ class LinkWatch:
         return self.heard_again(t) and (self.delivery.newest is None or _good(self.quality_heard))
 
     def heard_again(self, t: float) -> bool:
-        """Lost, and the owner heard again since, within LNK_GOOD_S of ``t``: a return slows to its approach speed
-        (RTL_APPROACH_SPD), so that the regain window and the braking end close to where it came."""
+        """Lost, and the owner heard again since, within LNK_GOOD_S of ``t``."""
         return (self.lost and self.contact_since is not None and self.last_heard is not None
                 and t - self.last_heard <= self.config.contact_gap + EPS)
+
+    def heard_well(self, t: float) -> bool:
+        """Lost, and heard again at ``t`` as if the link were back: the owner heard within LNK_GOOD_S, its delivery
+        since the contact began (over the regain window) at REGAIN_QUALITY, however few packets that is so far. A
+        return slows to its approach speed (RTL_APPROACH_SPD) while this holds, so that the regain's window and the
+        braking end close to where the link came back: from the first packet heard again at a hard edge (a return
+        that waited for a third packet there came to rest 0.6 m further in, beside ArduPilot's own physics), but
+        not for long after a stray packet at the fringe of a gradual fade, whose next packets show the gaps
+        between them (one packet in five: 2 of 6). A return that held the approach speed from a stray packet to
+        its end crawled through the whole fringe (open field seed 19 beside ArduPilot: 9.26 s to link before the
+        stick streamed at rest, 23.22 s after; docs/evidence.md)."""
+        q, _ = self._contact_delivery(t)
+        return q is not None and q >= REGAIN_QUALITY - EPS
+
+    def regain_begun(self, t: float) -> bool:
+        """``heard_well`` over REGAIN_PACKETS packets at least: the regain's window is filling, and a return keeps
+        its approach speed from here to its end even through the gaps a fringe still brings (a return that sped
+        up in each gap met the regain at full speed)."""
+        q, packets = self._contact_delivery(t)
+        return packets >= REGAIN_PACKETS and q is not None and q >= REGAIN_QUALITY - EPS
+
+    def _contact_delivery(self, t: float) -> tuple[float | None, int]:
+        """Lost and heard again: the owner's delivery over the regain window, charging nothing lost in the silence
+        before the contact began (a stray packet a second before the stream comes back whole would otherwise hold
+        the approach off until the regain itself), and the packets in it. Not heard again: (None, 0)."""
+        if not self.heard_again(t):
+            return None, 0
+        if self.delivery.newest is None:
+            return 1.0, REGAIN_PACKETS  # no sequence numbers: contact is the measure, as for the regain itself
+        since = self.contact_since
+        assert since is not None  # heard again
+        return self.delivery.share_since(t, max(self.config.regain_s, self.config.window), since)
 
     def with_config(self, config: WatchConfig) -> LinkWatch:
         t = self.last_heard
