@@ -64,9 +64,10 @@ SPECS: tuple[ParamSpec, ...] = (
               "the robot's footprint radius: a return keeps its body a few cm off what the range sensor sees "
               "now, whatever the estimate's error (0 = unknown, not kept)"),
     ParamSpec("RTL_APPROACH_SPD", 1.0, 0.0, 5.0, "m/s",
-              "from the first owner packet heard again during a return, and while seeking past the link map's place, "
-              "the return drives no faster than this, so the regain window and the braking end close to where the "
-              "link came back (0 = no slowing)"),
+              "while the owner is heard well again during a return (its delivery since the contact began at the "
+              "regain's share) and from the regain window's third such packet to the block's end, and while seeking "
+              "past the link map's place, the return drives no faster than this, so the regain window and the braking "
+              "end close to where the link came back (0 = no slowing)"),
 )
 BY_NAME = {s.name: s for s in SPECS}
 

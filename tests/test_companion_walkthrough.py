@@ -31,7 +31,7 @@ pytestmark = [pytest.mark.firmware, pytest.mark.interop, pytest.mark.exclusive]
 PAGE = Path(__file__).resolve().parent.parent / "docs" / "companion.md"
 SECTION = "To try it on a desk with the SITL firmware"
 # how far inside the station's range the rover may stop: DESIGN §6.2's R - 3 m exactly. The return slows to
-# RTL_APPROACH_SPD at the first packet heard again, LINK_REGAINED comes over the regain window, the companion
+# RTL_APPROACH_SPD at the first packet heard well again, LINK_REGAINED comes over the regain window, the companion
 # brakes with zero targets before HOLD, and its speed targets carry no overshoot of the firmware's speed loop
 # (``vehicle.companion.governor``). Measured: 2.6 m inside (17.4 m from home, one run); before the governor 2.8 m
 # inside; before the approach speed and the brake 6.0, 6.1 and 6.2 m inside, HOLD rolling the rover on.
