@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from vehicle.lease import ExpireReason, Holder, LeaseBook, LeaseConfig
-from vehicle.link_watch import EPS, GOOD_QUALITY, Delivery, LinkWatch, Trigger, WatchConfig
+from vehicle.link_watch import EPS, GOOD_QUALITY, REGAIN_PACKETS, Delivery, LinkWatch, Trigger, WatchConfig
 
 GCS = 255
 RATE = 10.0  # packets/s, a ground station streaming teleop
@@ -297,7 +297,7 @@ def test_the_approach_holds_while_heard_well_not_after_a_stray_packet():
     st.run(5.0, 10.0, arrives=lambda k, t: False)
     st.send(10.0)  # a stray packet
     st.step(10.0)
-    assert st.watch.heard_again(10.0) and st.watch.heard_well(10.0) and not st.watch.regain_begun(10.0)
+    assert st.watch.heard_again(10.0) and 0 < st.watch.heard_well(10.0) < REGAIN_PACKETS  # not yet begun
     well = []
     begun = []
     for n in range(501, 1000):
@@ -305,7 +305,7 @@ def test_the_approach_holds_while_heard_well_not_after_a_stray_packet():
         if n % 5 == 0:
             st.send(t, t >= 18.0 - 1e-9 or (t < 16.0 and (n // 5) % 5 == 0))
         st.step(t)
-        if st.watch.regain_begun(t):
+        if st.watch.heard_well(t) >= REGAIN_PACKETS:
             begun.append(t)
         if st.watch.heard_well(t):
             well.append(t)

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Protocol
 
 from vehicle.lease import ExecutionLease, ExpireReason, LeaseBook, Outcome, ServiceBlock
 from vehicle.lease_terms import State
+from vehicle.link_watch import REGAIN_PACKETS
 from vehicle.navigation import FollowerConfig
 from vehicle.port import Snapshot, VehiclePort
 from vehicle.returning import Way
@@ -135,10 +136,13 @@ class ReturnDriver:
             return 0.0, 0.0
         self.saw_loss = self.saw_loss or link_lost
         # the approach speed while the owner is heard as if the link were back, and from the moment the regain's
-        # window began to fill to the block's end (``LinkWatch.heard_well``, ``regain_begun``; docs/evidence.md,
-        # "The measurements behind the vehicle's code")
-        self.approaching = self.approaching or book.link.regain_begun(t)
-        approach = self.approaching or book.link.heard_well(t)
+        # window began to fill to the block's end (``LinkWatch.heard_well``)
+        if not self.approaching:
+            well = book.link.heard_well(t)
+            self.approaching = well >= REGAIN_PACKETS
+            approach = well > 0
+        else:
+            approach = True
         try:
             if fresh:
                 step = self._begin(cur, x, y, yaw, t, trail, outbound_speed, free, approach)

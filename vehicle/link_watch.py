@@ -352,25 +352,17 @@ class LinkWatch:
         return (self.lost and self.contact_since is not None and self.last_heard is not None
                 and t - self.last_heard <= self.config.contact_gap + EPS)
 
-    def heard_well(self, t: float) -> bool:
-        """Lost, and heard again at ``t`` as if the link were back: the owner heard within LNK_GOOD_S, its delivery
-        since the contact began (over the regain window) at REGAIN_QUALITY, however few packets that is so far. A
-        return slows to its approach speed (RTL_APPROACH_SPD) while this holds, so that the regain's window and the
-        braking end close to where the link came back: from the first packet heard again at a hard edge (a return
-        that waited for a third packet there came to rest 0.6 m further in, beside ArduPilot's own physics), but
-        not for long after a stray packet at the fringe of a gradual fade, whose next packets show the gaps
-        between them (one packet in five: 2 of 6). A return that held the approach speed from a stray packet to
-        its end crawled through the whole fringe (open field seed 19 beside ArduPilot: 9.26 s to link before the
-        stick streamed at rest, 23.22 s after; docs/evidence.md)."""
-        q, _ = self._contact_delivery(t)
-        return q is not None and q >= REGAIN_QUALITY - EPS
-
-    def regain_begun(self, t: float) -> bool:
-        """``heard_well`` over REGAIN_PACKETS packets at least: the regain's window is filling, and a return keeps
-        its approach speed from here to its end even through the gaps a fringe still brings (a return that sped
-        up in each gap met the regain at full speed)."""
+    def heard_well(self, t: float) -> int:
+        """Lost, and heard again at ``t`` as if the link were back: the packets in the regain window when the owner
+        was heard within LNK_GOOD_S and its delivery since the contact began reaches REGAIN_QUALITY, however few
+        they are so far; 0 otherwise. A return slows to its approach speed (RTL_APPROACH_SPD) while this is not 0,
+        so that the regain's window and the braking end close to where the link came back: from the first packet
+        heard again at a hard edge, but not for long after a stray packet at the fringe of a gradual fade, whose
+        next packets show the gaps between them (one packet in five: 2 of 6). From REGAIN_PACKETS on the regain's
+        window is filling, and a return keeps its approach speed to its end even through the gaps a fringe still
+        brings. Why both, measured: docs/evidence.md, "The return service"."""
         q, packets = self._contact_delivery(t)
-        return packets >= REGAIN_PACKETS and q is not None and q >= REGAIN_QUALITY - EPS
+        return packets if q is not None and q >= REGAIN_QUALITY - EPS else 0
 
     def _contact_delivery(self, t: float) -> tuple[float | None, int]:
         """Lost and heard again: the owner's delivery over the regain window, charging nothing lost in the silence
